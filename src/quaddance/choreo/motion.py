@@ -1,0 +1,266 @@
+"""Human motion files -> left/right foot heights above the floor, in metres.
+
+Supported formats:
+
+- EDGE output pickle (``.pkl``): ``full_pose`` (T, 24, 3) SMPL joint positions, z-up, metres,
+  30 fps unless the file holds ``fps``; or only ``smpl_poses`` / ``smpl_trans``, whose up axis is
+  then found from the body.
+- AIST++ motion pickle (``.pkl``): ``smpl_poses`` (T, 72), ``smpl_trans`` (T, 3) and
+  ``smpl_scaling`` (1,); y-up, 60 fps; ``smpl_trans / smpl_scaling`` is in metres.
+- BVH (``.bvh``): any skeleton whose ankles can be found by name; unit and up axis detected.
+
+Pickles are read with `safe_load_pickle`, never plain pickle. The floor is estimated per
+sequence as a low percentile of both ankles' heights, so a foot's height is its ankle's
+height above its standing height (the foot's bottom, up to the sole thickness).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from quaddance.choreo import bvh, smpl
+from quaddance.choreo.safe_pickle import safe_load_pickle
+from quaddance.errors import InputFileError
+
+_PICKLE_SUFFIXES = (".pkl", ".pickle")
+_BVH_SUFFIXES = (".bvh",)
+_AXIS_NAMES = "xyz"
+
+
+@dataclass(frozen=True)
+class MotionImportConfig:
+    """How motion files are read."""
+
+    edge_fps: float = 30.0  # EDGE output frame rate (FACTS.md section 3)
+    aist_fps: float = 60.0  # AIST++ motion frame rate (FACTS.md section 3)
+    edge_up_axis: int = 2  # EDGE full_pose is z-up (FACTS.md section 3)
+    aist_up_axis: int = 1  # AIST++ is y-up (FACTS.md section 3)
+    # Floor = this percentile of both ankles' heights (FACTS.md section 3: "a low percentile");
+    # low enough to sit on standing frames, high enough to ignore a few glitched frames.
+    floor_percentile: float = 2.0
+    min_duration_s: float = 1.0  # shorter clips cannot carry a dance (brief of the importer)
+
+
+@dataclass
+class HumanMotion:
+    """Left/right foot heights of a human dance.
+
+    Attributes
+    ----------
+    fps : float
+        Frame rate of ``feet_m``, frames per second.
+    feet_m : np.ndarray, shape (T, 2)
+        Height of the (left, right) foot above the floor, metres, >= 0.
+    source : str
+        Where the curves came from, for logs and plots (file name and format).
+    """
+
+    fps: float
+    feet_m: np.ndarray = field(repr=False)
+    source: str
+
+    @property
+    def duration_s(self) -> float:
+        """Length of the motion, seconds."""
+        return self.feet_m.shape[0] / self.fps
+
+
+def feet_above_floor(ankle_heights: np.ndarray, floor_percentile: float) -> np.ndarray:
+    """Ankle heights relative to a floor estimated from the sequence itself.
+
+    Parameters
+    ----------
+    ankle_heights : np.ndarray, shape (T, 2)
+        Height of the (left, right) ankle along the up axis, metres, any origin.
+    floor_percentile : float
+        Percentile (0-100) of all ankle heights of both feet taken as the floor.
+
+    Returns
+    -------
+    np.ndarray, shape (T, 2)
+        ``ankle_heights - floor`` clipped at 0, metres.
+    """
+    floor = np.percentile(ankle_heights, floor_percentile)
+    return np.clip(ankle_heights - floor, 0.0, None)
+
+
+def up_axis_of(positions: np.ndarray, root: int, ankles: tuple[int, int]) -> tuple[int, float]:
+    """The world axis (and its sign) pointing from the feet to the pelvis on average.
+
+    Parameters
+    ----------
+    positions : np.ndarray, shape (T, J, 3)
+        World joint positions, any unit.
+    root : int
+        Index of the pelvis / root joint.
+    ankles : (int, int)
+        Indices of the left and right ankles.
+
+    Returns
+    -------
+    (axis, sign)
+        ``axis`` in 0, 1, 2 and ``sign`` +1.0 or -1.0, so that height = sign * position[axis].
+    """
+    feet_to_root = positions[:, root] - positions[:, list(ankles)].mean(axis=1)
+    mean = feet_to_root.mean(axis=0)
+    axis = int(np.argmax(np.abs(mean)))
+    return axis, float(np.sign(mean[axis]) or 1.0)
+
+
+def _array(path: Path, data: dict[str, Any], key: str, shape: tuple[int | None, ...]) -> np.ndarray:
+    """``data[key]`` as a finite float array of ``shape`` (None matches any length)."""
+    try:
+        value = np.asarray(data[key], dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputFileError(path, f"'{key}' is not a numeric array") from None
+    if value.ndim != len(shape) or any(
+        want is not None and got != want for got, want in zip(value.shape, shape, strict=True)
+    ):
+        want_text = "(" + ", ".join("T" if s is None else str(s) for s in shape) + ")"
+        raise InputFileError(
+            path, f"'{key}' has shape {value.shape}, expected {want_text} for this format"
+        )
+    if not np.all(np.isfinite(value)):
+        raise InputFileError(path, f"'{key}' contains NaN or infinite values")
+    return value
+
+
+def _positive_scalar(path: Path, data: dict[str, Any], key: str) -> float:
+    """``data[key]`` as one finite positive number (a scalar or a one-element array)."""
+    try:
+        value = np.asarray(data[key], dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise InputFileError(path, f"'{key}' is not a number") from None
+    if value.size != 1 or not np.isfinite(value[0]) or value[0] <= 0:
+        raise InputFileError(path, f"'{key}' must be one positive number, got {value.tolist()}")
+    return float(value[0])
+
+
+def _motion_from_pickle(path: Path, cfg: MotionImportConfig) -> tuple[float, np.ndarray, str]:
+    """(fps, ankle heights (T, 2) in metres with any origin, description) from a pickle."""
+    data = safe_load_pickle(path)
+    if not isinstance(data, dict):
+        raise InputFileError(
+            path, f"pickle holds a {type(data).__name__}, expected a dict of motion arrays"
+        )
+    if "full_pose" in data:
+        fps = _positive_scalar(path, data, "fps") if "fps" in data else cfg.edge_fps
+        joints = _array(path, data, "full_pose", (None, smpl.N_JOINTS, 3))
+        heights = joints[:, [smpl.LEFT_ANKLE, smpl.RIGHT_ANKLE], cfg.edge_up_axis]
+        return fps, heights, f"EDGE full_pose, {_AXIS_NAMES[cfg.edge_up_axis]}-up"
+    if "smpl_poses" not in data or "smpl_trans" not in data:
+        keys = ", ".join(sorted(map(str, data))) or "none"
+        raise InputFileError(
+            path,
+            "is not an EDGE or AIST++ motion: expected 'full_pose' (EDGE) or 'smpl_poses' and "
+            f"'smpl_trans' (AIST++, EDGE); keys found: {keys}",
+        )
+    poses = _array(path, data, "smpl_poses", (None, 3 * smpl.N_JOINTS))
+    trans = _array(path, data, "smpl_trans", (poses.shape[0], 3))
+    ankles = (smpl.LEFT_ANKLE, smpl.RIGHT_ANKLE)
+    if "smpl_scaling" in data:
+        fps = _positive_scalar(path, data, "fps") if "fps" in data else cfg.aist_fps
+        scaling = _positive_scalar(path, data, "smpl_scaling")
+        joints = smpl.smpl_joints(poses, trans / scaling)
+        heights = joints[:, list(ankles), cfg.aist_up_axis]
+        return fps, heights, f"AIST++ SMPL, {_AXIS_NAMES[cfg.aist_up_axis]}-up"
+    # EDGE parameters without full_pose: the global orientation decides the up axis.
+    fps = _positive_scalar(path, data, "fps") if "fps" in data else cfg.edge_fps
+    joints = smpl.smpl_joints(poses, trans)
+    axis, sign = up_axis_of(joints, smpl.PELVIS, ankles)
+    heights = sign * joints[:, list(ankles), axis]
+    return fps, heights, f"EDGE SMPL parameters, {_AXIS_NAMES[axis]}-up (detected)"
+
+
+def _motion_from_bvh(path: Path) -> tuple[float, np.ndarray, str]:
+    """(fps, ankle heights (T, 2) in metres with any origin, description) from a BVH file."""
+    motion = bvh.load_bvh(path)
+    ankles = bvh.find_ankles(motion.joint_names)
+    if ankles is None:
+        raise InputFileError(
+            path,
+            "BVH has no joints recognisable as left and right ankles (e.g. LeftFoot/RightFoot, "
+            f"L_Ankle/R_Ankle); joints: {', '.join(motion.joint_names)}",
+        )
+    leg_chain = np.mean([bvh.chain_length(motion.offsets, motion.parents, a) for a in ankles])
+    if leg_chain <= 0:
+        raise InputFileError(path, "BVH skeleton has zero-length legs")
+    unit, metres_per_unit = bvh.guess_unit(float(leg_chain))
+    axis, sign = up_axis_of(motion.positions, 0, ankles)
+    heights = sign * metres_per_unit * motion.positions[:, list(ankles), axis]
+    names = "/".join(motion.joint_names[a] for a in ankles)
+    sign_text = "" if sign > 0 else "-"
+    return motion.fps, heights, f"BVH, {unit}, {sign_text}{_AXIS_NAMES[axis]}-up, ankles {names}"
+
+
+def _sniff(path: Path) -> str | None:
+    """'pickle', 'bvh' or None from the first bytes, for files with an unknown suffix."""
+    try:
+        with path.open("rb") as f:
+            head = f.read(16)
+    except OSError as err:
+        raise InputFileError(path, f"cannot be read ({err.strerror or err})") from None
+    if head.lstrip().upper().startswith(b"HIERARCHY"):
+        return "bvh"
+    if head[:1] == b"\x80":  # PROTO opcode: every pickle of protocol 2 or later starts so
+        return "pickle"
+    return None
+
+
+def load_motion(path: str | Path, cfg: MotionImportConfig | None = None) -> HumanMotion:
+    """Read a human motion file and return its left/right foot heights above the floor.
+
+    Parameters
+    ----------
+    path : str or Path
+        EDGE or AIST++ pickle (``.pkl``, ``.pickle``) or BVH (``.bvh``); a file with another
+        suffix is recognised by its first bytes.
+    cfg : MotionImportConfig, optional
+        Frame rates, axes and floor estimate; defaults to `MotionImportConfig()`.
+
+    Returns
+    -------
+    HumanMotion
+        ``feet_m`` (T, 2): (left, right) ankle height above the estimated floor, metres, at
+        the file's frame rate.
+
+    Raises
+    ------
+    InputFileError
+        If the file is missing, of unknown format, unsafe, malformed (missing keys, wrong
+        shapes, NaN / inf), or shorter than ``cfg.min_duration_s``.
+    """
+    cfg = cfg or MotionImportConfig()
+    path = Path(path)
+    if not path.is_file():
+        raise InputFileError(path, "does not exist or is not a file")
+    suffix = path.suffix.lower()
+    if suffix in _PICKLE_SUFFIXES:
+        kind = "pickle"
+    elif suffix in _BVH_SUFFIXES:
+        kind = "bvh"
+    else:
+        kind = _sniff(path)
+    if kind == "pickle":
+        fps, heights, description = _motion_from_pickle(path, cfg)
+    elif kind == "bvh":
+        fps, heights, description = _motion_from_bvh(path)
+    else:
+        raise InputFileError(
+            path,
+            f"unknown motion format '{suffix or '(no suffix)'}': expected an EDGE or AIST++ "
+            "pickle (.pkl, .pickle) or a BVH file (.bvh)",
+        )
+    n_frames = heights.shape[0]
+    if n_frames < cfg.min_duration_s * fps:
+        raise InputFileError(
+            path,
+            f"motion is too short: {n_frames} frames at {fps:g} fps = {n_frames / fps:.2f} s, "
+            f"need at least {cfg.min_duration_s:g} s",
+        )
+    feet_m = feet_above_floor(heights, cfg.floor_percentile)
+    return HumanMotion(fps=fps, feet_m=feet_m, source=f"{path.name} ({description}, {fps:g} fps)")

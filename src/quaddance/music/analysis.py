@@ -1,0 +1,487 @@
+"""Music analysis: tempo, beats, downbeats, onset and loudness envelopes, sections.
+
+The beat tracker follows the classic recipe (onset envelope -> tempo -> dynamic programming)
+with the changes that matter for dance music:
+
+1. The onset envelope is spectral flux on a log-mel spectrogram with extra weight on the low
+   band (kick and bass) so that the beat locks to the drums rather than to off-beat hats or
+   chord stabs, and it is normalised by its local level so that quiet intros still count.
+2. The tempo is chosen among the metrical levels of the strongest periodicity (T/2, 2T/3, T,
+   3T/2, 2T) by how well a beat comb of that tempo fits the onsets, with a log-normal prior
+   around the dance range (80-160 BPM) breaking near ties: half- and double-tempo errors
+   dominate beat-tracking errors (FACTS.md §4).
+3. The tempo may change: a local tempo curve is tracked (Viterbi over a windowed
+   autocorrelation, near the chosen tempo) and the dynamic program follows it.
+
+Envelopes are sampled at ``env_fps = sr / hop_length`` (43.07 frames/s at 22.05 kHz, hop 512).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from quaddance.errors import InputFileError
+
+BEATS_PER_BAR = 4  # 4/4 is assumed: nearly all dance music is in four
+
+
+@dataclass(frozen=True)
+class AnalysisConfig:
+    """Settings of the analyser; defaults are librosa's where not stated otherwise."""
+
+    hop_length: int = 512
+    """Samples between envelope frames (librosa default; 23.2 ms at 22.05 kHz)."""
+    n_fft: int = 2048
+    """FFT size (librosa default; 93 ms at 22.05 kHz)."""
+    n_mels: int = 96
+    """Mel bands of the onset spectrogram."""
+    low_band_hz: float = 160.0
+    """Upper edge of the kick/bass band, Hz (kick fundamentals lie at 40-120 Hz)."""
+    low_band_weight: float = 1.0
+    """Weight of the low-band flux added to the full-band flux (tuned on code-made songs)."""
+    local_norm_s: float = 3.0
+    """Window of the local level that the onset envelope is divided by, seconds."""
+    min_bpm: float = 50.0
+    max_bpm: float = 220.0
+    prior_center_bpm: float = 120.0
+    """Centre of the tempo prior: the middle of the dance range 80-160 BPM (FACTS.md §4)."""
+    prior_sigma_octaves: float = 1.2
+    """Width of the log-normal tempo prior, octaves (tuned on code-made songs)."""
+    tempo_harmonics: int = 4
+    """Multiples of a beat period whose autocorrelation counts towards its salience."""
+    tempo_window_s: float = 8.0
+    """Autocorrelation window of the local tempo curve, seconds."""
+    max_tempo_ratio: float = 1.3
+    """Local tempo may stray this far (ratio) from the global tempo."""
+    tempo_deviation_cost: float = 2.0
+    """Cost of local tempo deviating from the global tempo, per squared octave."""
+    tightness: float = 300.0
+    """Penalty on beat intervals that differ from the local period (librosa default 100)."""
+    onset_delay_s: float = 0.0
+    """Delay of the onset envelope's peaks behind the true onsets, removed from beat times."""
+    section_kernel_beats: int = 16
+    """Half-width of the checkerboard kernel for section novelty, beats (4 bars)."""
+    section_min_bars: int = 4
+    """Shortest section, bars."""
+
+
+@dataclass
+class Analysis:
+    """What the rest of quaddance needs to know about a piece of music.
+
+    Attributes:
+        tempo_bpm: main tempo, beats per minute.
+        beats_s: (n_beats,) beat times, seconds.
+        downbeats_s: (n_bars,) times of beat 1 of each bar (4/4 assumed), seconds.
+        onset_env: (n_frames,) onset strength, scaled to a maximum of 1, at ``env_fps``.
+        rms_env: (n_frames,) loudness as linear RMS amplitude (full scale = 1), at ``env_fps``.
+        env_fps: frame rate of both envelopes, frames per second (``sr / hop_length``).
+        sections_s: (n_sections,) start time of each section, seconds; the first is 0.0.
+        duration_s: length of the audio, seconds.
+        source: the file analysed, or "" for an array.
+    """
+
+    tempo_bpm: float
+    beats_s: np.ndarray
+    downbeats_s: np.ndarray
+    onset_env: np.ndarray
+    rms_env: np.ndarray
+    env_fps: float
+    sections_s: np.ndarray
+    duration_s: float
+    source: str = ""
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """Plain-JSON form: lists of floats, times rounded to 0.1 ms."""
+        return {
+            "tempo_bpm": round(float(self.tempo_bpm), 3),
+            "beats_s": [round(float(t), 4) for t in self.beats_s],
+            "downbeats_s": [round(float(t), 4) for t in self.downbeats_s],
+            "onset_env": [round(float(v), 5) for v in self.onset_env],
+            "rms_env": [round(float(v), 6) for v in self.rms_env],
+            "env_fps": float(self.env_fps),
+            "sections_s": [round(float(t), 4) for t in self.sections_s],
+            "duration_s": round(float(self.duration_s), 4),
+            "source": self.source,
+        }
+
+    def save_json(self, path: str | Path) -> None:
+        """Write the analysis as JSON, atomically."""
+        from quaddance.fileio import write_json
+
+        write_json(path, self.to_json_dict())
+
+    @classmethod
+    def load_json(cls, path: str | Path) -> Analysis:
+        """Read an analysis written by ``save_json``; bad files raise ``InputFileError``."""
+        path = Path(path)
+        if not path.is_file():
+            raise InputFileError(path, "no such file")
+        try:
+            data = json.loads(path.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as err:
+            raise InputFileError(path, f"is not valid JSON ({err})") from err
+        required = ("tempo_bpm", "beats_s", "downbeats_s", "onset_env", "rms_env", "env_fps")
+        missing = [k for k in (*required, "sections_s") if k not in data]
+        if not isinstance(data, dict) or missing:
+            raise InputFileError(path, f"is not a quaddance analysis (missing {missing})")
+        try:
+            arrays = {
+                k: np.asarray(data[k], dtype=float)
+                for k in ("beats_s", "downbeats_s", "onset_env", "rms_env", "sections_s")
+            }
+            env_fps = float(data["env_fps"])
+            duration_s = float(data.get("duration_s", len(arrays["rms_env"]) / env_fps))
+            tempo_bpm = float(data["tempo_bpm"])
+        except (TypeError, ValueError) as err:
+            raise InputFileError(path, f"has a malformed field ({err})") from err
+        if env_fps <= 0 or any(a.ndim != 1 for a in arrays.values()):
+            raise InputFileError(path, "has a non-positive env_fps or a non-list field")
+        return cls(
+            tempo_bpm=tempo_bpm,
+            env_fps=env_fps,
+            duration_s=duration_s,
+            source=str(data.get("source", "")),
+            **arrays,
+        )
+
+
+# --- features ---------------------------------------------------------------------------------
+
+
+@dataclass
+class _Features:
+    onset: np.ndarray  # (n,) beat-onset envelope, locally normalised
+    low_onset: np.ndarray  # (n,) low-band flux
+    raw_onset: np.ndarray  # (n,) full-band flux before normalisation
+    rms: np.ndarray  # (n,) linear RMS
+    chroma: np.ndarray  # (12, n)
+    fps: float
+
+
+def _moving_average(x: np.ndarray, width: int) -> np.ndarray:
+    import scipy.ndimage
+
+    return scipy.ndimage.uniform_filter1d(x, size=max(1, width), mode="nearest")
+
+
+def _features(y: np.ndarray, sr: int, cfg: AnalysisConfig) -> _Features:
+    import librosa
+
+    fps = sr / cfg.hop_length
+    stft = np.abs(librosa.stft(y, n_fft=cfg.n_fft, hop_length=cfg.hop_length, center=True))
+    power = stft**2
+    mel_fb = librosa.filters.mel(sr=sr, n_fft=cfg.n_fft, n_mels=cfg.n_mels, fmax=sr / 2)
+    mel_db = librosa.power_to_db(mel_fb @ power, ref=np.max, top_db=80.0)
+    flux = np.maximum(0.0, np.diff(mel_db, axis=1, prepend=mel_db[:, :1]))
+    mel_hz = librosa.mel_frequencies(n_mels=cfg.n_mels + 2, fmax=sr / 2)[1:-1]
+    low = mel_hz <= cfg.low_band_hz
+    raw = flux.mean(axis=0)
+    low_onset = flux[low].mean(axis=0) if low.any() else np.zeros_like(raw)
+    onset = raw + cfg.low_band_weight * low_onset
+    # Remove the slowly varying floor, then divide by the local level, so that a quiet intro
+    # yields beats as clear as a loud chorus. The floor on the divisor keeps silence silent.
+    win = round(cfg.local_norm_s * fps)
+    onset = np.maximum(0.0, onset - _moving_average(onset, round(0.5 * fps)))
+    level = _moving_average(onset, win)
+    onset = onset / np.maximum(level, 0.1 * float(np.mean(level)) + 1e-9)
+    rms = librosa.feature.rms(S=stft, frame_length=cfg.n_fft)[0]
+    chroma = librosa.feature.chroma_stft(S=power, sr=sr, n_fft=cfg.n_fft)
+    return _Features(onset, low_onset, raw, rms, chroma, fps)
+
+
+# --- tempo ------------------------------------------------------------------------------------
+
+
+def _autocorrelation(x: np.ndarray, max_lag: int) -> np.ndarray:
+    """(max_lag + 1,) unbiased autocorrelation of a mean-removed signal, lag 0 normalised to 1."""
+    x = x - x.mean()
+    n = len(x)
+    spec = np.fft.rfft(x, 2 * n)
+    ac = np.fft.irfft(np.abs(spec) ** 2)[: max_lag + 1]
+    ac /= np.maximum(n - np.arange(max_lag + 1), 1)
+    return ac / max(ac[0], 1e-12)
+
+
+def _harmonic_salience(ac: np.ndarray, lags: np.ndarray, n_harmonics: int) -> np.ndarray:
+    """Mean autocorrelation at 1, 2, ... ``n_harmonics`` times each lag (frames).
+
+    A true beat period repeats at all its multiples; a period of 1.5 beats (the usual
+    "2/3 tempo" error) lines up with the beats only at every other multiple, so it scores lower.
+    """
+    idx = np.arange(len(ac))
+    total = np.zeros(len(lags))
+    count = np.zeros(len(lags))
+    for k in range(1, n_harmonics + 1):
+        ok = k * lags <= idx[-1]
+        total[ok] += np.interp(k * lags[ok], idx, ac)
+        count[ok] += 1
+    return total / np.maximum(count, 1)
+
+
+def _prior(bpm: np.ndarray | float, cfg: AnalysisConfig) -> np.ndarray:
+    """Log-normal tempo prior (peak 1 at ``cfg.prior_center_bpm``)."""
+    z = np.log2(np.asarray(bpm) / cfg.prior_center_bpm) / cfg.prior_sigma_octaves
+    return np.exp(-0.5 * z * z)
+
+
+def _global_tempo(onset: np.ndarray, fps: float, cfg: AnalysisConfig) -> float:
+    """Main tempo, BPM: the lag whose harmonics carry the most autocorrelation, times the prior."""
+    n_harmonics = cfg.tempo_harmonics
+    max_lag = min(len(onset) - 1, int(n_harmonics * fps * 60.0 / cfg.min_bpm) + 2)
+    ac = _autocorrelation(onset, max_lag)
+    # Quarter-frame lag steps: at 43 frames/s a whole frame is 4 % of a 120 BPM period.
+    lags = np.arange(fps * 60.0 / cfg.max_bpm, min(fps * 60.0 / cfg.min_bpm, max_lag), 0.25)
+    if len(lags) == 0:
+        return cfg.prior_center_bpm
+    bpm = 60.0 * fps / lags
+    score = _harmonic_salience(ac, lags, n_harmonics) * _prior(bpm, cfg)
+    return float(bpm[int(np.argmax(score))])
+
+
+def _local_period(
+    onset: np.ndarray, fps: float, tempo_bpm: float, cfg: AnalysisConfig
+) -> np.ndarray:
+    """(n,) beat period per frame, frames: a smooth tempo path near ``tempo_bpm``.
+
+    Each 0.25 s, the harmonic salience of periods within ``cfg.max_tempo_ratio`` of the global
+    period is measured in a ``cfg.tempo_window_s`` window; a Viterbi pass then picks a path
+    that changes slowly and stays near the global tempo unless the music clearly moves away.
+    """
+    n = len(onset)
+    period = 60.0 * fps / tempo_bpm
+    win = round(cfg.tempo_window_s * fps)
+    if n < 2 * win:
+        return np.full(n, period)
+    # Candidate periods on a log grid of 1 % steps around the global period.
+    log_ratio = np.arange(-np.log(cfg.max_tempo_ratio), np.log(cfg.max_tempo_ratio), 0.01)
+    periods = period * np.exp(log_ratio)
+    hop = max(1, round(fps / 4))
+    centers = np.arange(win // 2, n - win // 2 + 1, hop)
+    max_lag = min(win - 1, int(np.ceil(periods.max() * cfg.tempo_harmonics)) + 2)
+    window = np.hanning(win)
+    emis = np.zeros((len(centers), len(periods)))
+    for k, c in enumerate(centers):
+        seg = onset[c - win // 2 : c - win // 2 + win]
+        ac = _autocorrelation((seg - seg.mean()) * window, max_lag)
+        emis[k] = _harmonic_salience(ac, periods, cfg.tempo_harmonics)
+    emis = emis / (np.abs(emis).max(axis=1, keepdims=True) + 1e-9)
+    # Staying near the global tempo is preferred: a change has to be clear to be followed.
+    emis -= cfg.tempo_deviation_cost * (log_ratio / np.log(2.0)) ** 2
+    step = np.arange(len(periods))
+    trans = -0.5 * ((step[:, None] - step[None, :]) / 2.0) ** 2  # about 2 % per 0.25 s
+    score = emis[0].copy()
+    back = np.zeros((len(centers), len(periods)), dtype=int)
+    for k in range(1, len(centers)):
+        cand = score[:, None] + trans
+        back[k] = np.argmax(cand, axis=0)
+        score = cand[back[k], step] + emis[k]
+    path = np.zeros(len(centers), dtype=int)
+    path[-1] = int(np.argmax(score))
+    for k in range(len(centers) - 1, 0, -1):
+        path[k - 1] = back[k, path[k]]
+    return np.interp(np.arange(n), centers, periods[path])
+
+
+# --- beats ------------------------------------------------------------------------------------
+
+
+def _track_beats(onset: np.ndarray, period: np.ndarray, tightness: float) -> np.ndarray:
+    """Beat frames by dynamic programming (Ellis 2007) with a per-frame beat period.
+
+    Args:
+        onset: (n,) onset envelope.
+        period: (n,) expected beat period at each frame, frames.
+        tightness: weight of the squared log-ratio penalty on intervals off the period.
+
+    Returns:
+        (n_beats,) increasing frame indices.
+    """
+    n = len(onset)
+    o = onset / (onset.std() + 1e-9)
+    score = o.copy()
+    back = np.full(n, -1)
+    for t in range(n):
+        p = period[t]
+        lo, hi = int(t - 2.0 * p), int(t - 0.5 * p)
+        if hi < 0:
+            continue
+        lo = max(lo, 0)
+        prev = np.arange(lo, hi + 1)
+        cand = score[prev] - tightness * np.log((t - prev) / p) ** 2
+        j = int(np.argmax(cand))
+        if cand[j] > 0:
+            score[t] = o[t] + cand[j]
+            back[t] = prev[j]
+    # Start backtracking at the best score in the last period.
+    tail = max(0, n - int(round(period[-1])))
+    t = tail + int(np.argmax(score[tail:]))
+    beats = [t]
+    while back[t] >= 0:
+        t = int(back[t])
+        beats.append(t)
+    return np.array(beats[::-1])
+
+
+def _refine(beats: np.ndarray, onset: np.ndarray, radius: int = 1) -> np.ndarray:
+    """Sub-frame beat positions: parabolic peak of the onset envelope near each beat frame."""
+    out = beats.astype(float)
+    for i, b in enumerate(beats):
+        a, c = max(1, b - radius), min(len(onset) - 2, b + radius)
+        if a > c:
+            continue
+        j = a + int(np.argmax(onset[a : c + 1]))
+        y0, y1, y2 = onset[j - 1], onset[j], onset[j + 1]
+        denom = y0 - 2 * y1 + y2
+        out[i] = j + (0.5 * (y0 - y2) / denom if denom < 0 else 0.0)
+    return out
+
+
+def _downbeat_phase(beat_frames: np.ndarray, feats: _Features) -> int:
+    """Index (0-3) of the first downbeat: the bar phase with most bass onsets and chord changes."""
+    if len(beat_frames) < 2 * BEATS_PER_BAR:
+        return 0
+    idx = np.clip(beat_frames, 0, len(feats.low_onset) - 1)
+    low = feats.low_onset[idx]
+    low = low / (low.mean() + 1e-9)
+    # Chords change on downbeats: distance between the mean chroma of the beats either side.
+    chroma = feats.chroma[:, idx]
+    chroma = chroma / (np.linalg.norm(chroma, axis=0, keepdims=True) + 1e-9)
+    change = np.zeros(len(idx))
+    change[1:] = 1.0 - np.sum(chroma[:, 1:] * chroma[:, :-1], axis=0)
+    change = change / (change.mean() + 1e-9)
+    evidence = low + change
+    scores = [evidence[p::BEATS_PER_BAR].mean() for p in range(BEATS_PER_BAR)]
+    return int(np.argmax(scores))
+
+
+# --- sections ---------------------------------------------------------------------------------
+
+
+def _sections(
+    beat_frames: np.ndarray, downbeat_frames: np.ndarray, feats: _Features, cfg: AnalysisConfig
+) -> np.ndarray:
+    """Section start frames: peaks of checkerboard novelty on beat-synchronous features."""
+    import scipy.signal
+
+    n_beats = len(beat_frames)
+    k = cfg.section_kernel_beats
+    if n_beats < 2 * k:
+        return np.array([0])
+    bounds = np.concatenate([beat_frames, [len(feats.rms)]])
+    rms_db = 20 * np.log10(feats.rms + 1e-6)
+    feat = []
+    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+        b = max(b, a + 1)
+        chroma = feats.chroma[:, a:b].mean(axis=1)
+        feat.append(
+            np.concatenate(
+                [
+                    chroma / (np.linalg.norm(chroma) + 1e-9),
+                    [rms_db[a:b].mean() / 10.0, np.log1p(feats.raw_onset[a:b].mean())],
+                ]
+            )
+        )
+    f = np.array(feat)
+    f = (f - f.mean(axis=0)) / (f.std(axis=0) + 1e-9)
+    ssm = -np.linalg.norm(f[:, None, :] - f[None, :, :], axis=-1)
+    # Checkerboard kernel, tapered by a Gaussian (Foote 2000).
+    g = np.arange(-k, k) + 0.5
+    taper = np.exp(-0.5 * (g / (0.5 * k)) ** 2)
+    kernel = np.outer(np.sign(g), np.sign(g)) * np.outer(taper, taper)
+    padded = np.pad(ssm, k, mode="edge")
+    novelty = np.array(
+        [np.sum(kernel * padded[i : i + 2 * k, i : i + 2 * k]) for i in range(n_beats)]
+    )
+    novelty = -novelty  # a boundary is where within-block similarity beats cross-block
+    novelty = np.maximum(novelty, 0.0)
+    if novelty.max() <= 0:
+        return np.array([0])
+    novelty /= novelty.max()
+    peaks, _ = scipy.signal.find_peaks(
+        novelty, height=0.3, prominence=0.2, distance=cfg.section_min_bars * BEATS_PER_BAR
+    )
+    starts = [0]
+    for p in peaks:
+        # Snap each boundary to the nearest downbeat: sections start on bar lines.
+        frame = beat_frames[p]
+        if len(downbeat_frames):
+            frame = downbeat_frames[np.argmin(np.abs(downbeat_frames - frame))]
+        if frame - starts[-1] >= cfg.section_min_bars * BEATS_PER_BAR * np.median(
+            np.diff(beat_frames)
+        ):
+            starts.append(int(frame))
+    return np.array(starts)
+
+
+# --- entry points -----------------------------------------------------------------------------
+
+
+def analyze(y: np.ndarray, sr: int, cfg: AnalysisConfig | None = None) -> Analysis:
+    """Analyse mono audio.
+
+    Args:
+        y: (n,) mono audio samples.
+        sr: sample rate, Hz.
+        cfg: analyser settings; ``AnalysisConfig()`` if omitted.
+
+    Returns:
+        The tempo, beats, downbeats, envelopes (at ``sr / cfg.hop_length`` frames/s) and
+        section starts.
+    """
+    cfg = cfg or AnalysisConfig()
+    y = np.asarray(y, dtype=np.float32)
+    if y.ndim != 1:
+        raise ValueError(f"y must be mono (1-D), got shape {y.shape}")
+    feats = _features(y, sr, cfg)
+    fps = feats.fps
+    tempo_bpm = _global_tempo(feats.onset, fps, cfg)
+    global_bpm = tempo_bpm
+    period = _local_period(feats.onset, fps, tempo_bpm, cfg)
+    beat_frames = _track_beats(feats.onset, period, cfg.tightness)
+    beat_frames = _trim_silence(beat_frames, feats.rms)
+    beat_pos = _refine(beat_frames, feats.onset)
+    beats_s = np.maximum(0.0, beat_pos / fps - cfg.onset_delay_s)
+    phase = _downbeat_phase(beat_frames, feats)
+    downbeat_frames = beat_frames[phase::BEATS_PER_BAR]
+    section_frames = _sections(beat_frames, downbeat_frames, feats, cfg)
+    if len(beats_s) > 1:
+        tempo_bpm = float(60.0 / np.median(np.diff(beats_s)))
+    return Analysis(
+        tempo_bpm=tempo_bpm,
+        beats_s=beats_s,
+        downbeats_s=beats_s[phase::BEATS_PER_BAR],
+        onset_env=feats.raw_onset / max(float(feats.raw_onset.max()), 1e-9),
+        rms_env=feats.rms.astype(float),
+        env_fps=fps,
+        sections_s=section_frames / fps,
+        duration_s=len(y) / sr,
+        extra={"global_tempo_bpm": global_bpm, "period_frames": period},
+    )
+
+
+def _trim_silence(beat_frames: np.ndarray, rms: np.ndarray) -> np.ndarray:
+    """Drop beats before the music starts and after it ends (RMS below -50 dB of the peak)."""
+    import scipy.ndimage
+
+    loud = scipy.ndimage.maximum_filter1d(rms, size=9) > 10 ** (-50 / 20) * rms.max()
+    if not loud.any():
+        return beat_frames
+    first, last = np.argmax(loud), len(loud) - 1 - np.argmax(loud[::-1])
+    return beat_frames[(beat_frames >= first - 2) & (beat_frames <= last + 2)]
+
+
+def analyze_file(path: str | Path, cfg: AnalysisConfig | None = None) -> Analysis:
+    """Load an audio file (see ``load_audio``) and analyse it; ``source`` is set to its path."""
+    from quaddance.music.audio import DEFAULT_SR, load_audio
+
+    y, sr = load_audio(path, sr=DEFAULT_SR)
+    result = analyze(y, sr, cfg)
+    result.source = str(path)
+    return result

@@ -1,0 +1,179 @@
+"""Plots: the paper's Fig. 4 (target and measured front-foot heights) and the eval report.
+
+Matplotlib with the Agg backend (no display needed); files are written atomically.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from quaddance.errors import QuaddanceError
+from quaddance.fileio import atomic_path
+
+DPI = 120
+FOOT_COLOURS = {"FL": "tab:orange", "FR": "tab:blue", "RL": "tab:green", "RR": "tab:purple"}
+BEAT_COLOUR = "0.85"
+
+
+def _pyplot() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")  # headless; must be chosen before pyplot is imported
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig: Any, path: str | Path) -> None:
+    plt = _pyplot()
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=DPI, format=Path(path).suffix.lstrip(".") or "png")
+    finally:
+        plt.close(fig)
+
+
+def plot_feet(
+    path: str | Path,
+    time_s: np.ndarray,
+    targets_m: np.ndarray,
+    feet_m: np.ndarray,
+    beats_s: np.ndarray,
+    title: str = "",
+) -> Path:
+    """Fig. 4 of the paper: target (dashed) and measured (solid) foot heights over time.
+
+    Three stacked panels: front-left, front-right, and both rear feet (whose target is 0).
+    Beats are light vertical lines.
+
+    Args:
+        path: output image (.png, .pdf, .svg).
+        time_s: (T,) sample times, s.
+        targets_m: (T, 4) targets (FL, FR, RL, RR), m.
+        feet_m: (T, 4) measured foot heights, m.
+        beats_s: (B,) beat times, s.
+        title: figure title.
+
+    Returns:
+        ``path`` as a Path.
+    """
+    time = np.asarray(time_s, dtype=float).reshape(-1)
+    targets = np.asarray(targets_m, dtype=float)
+    feet = np.asarray(feet_m, dtype=float)
+    if targets.shape != (len(time), 4) or feet.shape != (len(time), 4):
+        raise QuaddanceError(
+            f"plot_feet needs targets_m and feet_m of shape ({len(time)}, 4), "
+            f"got {targets.shape} and {feet.shape}"
+        )
+    beats = np.asarray(beats_s, dtype=float).reshape(-1)
+    beats = beats[(beats >= time[0]) & (beats <= time[-1])] if len(time) else beats
+
+    plt = _pyplot()
+    fig, axes = plt.subplots(3, 1, figsize=(10, 6.5), sharex=True, constrained_layout=True)
+    front_top_m = max(
+        float(np.nanmax(targets[:, :2], initial=0.0)),
+        float(np.nanmax(feet[:, :2], initial=0.0)),
+        0.05,
+    )
+    for ax, i, name in [(axes[0], 0, "FL"), (axes[1], 1, "FR")]:
+        colour = FOOT_COLOURS[name]
+        ax.plot(time, targets[:, i], "--", color=colour, lw=1.3, label="target")
+        ax.plot(time, feet[:, i], "-", color=colour, lw=1.3, alpha=0.9, label="measured")
+        ax.set_ylabel(f"{name} height (m)")
+        ax.set_ylim(-0.02, 1.08 * front_top_m)
+        ax.legend(loc="upper right", fontsize=8, frameon=False, ncol=2)
+    rear_ax = axes[2]
+    for i, name in [(2, "RL"), (3, "RR")]:
+        rear_ax.plot(time, feet[:, i], "-", color=FOOT_COLOURS[name], lw=1.2, label=name)
+    rear_ax.axhline(0.0, color="0.3", ls="--", lw=1.0, label="target")
+    rear_ax.set_ylabel("rear height (m)")
+    rear_ax.set_xlabel("time (s)")
+    rear_ax.legend(loc="upper right", fontsize=8, frameon=False, ncol=3)
+    for ax in axes:
+        for beat in beats:
+            ax.axvline(beat, color=BEAT_COLOUR, lw=0.8, zorder=0)
+        ax.grid(axis="y", alpha=0.3)
+        if len(time):
+            ax.set_xlim(time[0], time[-1])
+    if title:
+        fig.suptitle(title)
+    _save(fig, path)
+    return Path(path)
+
+
+def _get(row: Mapping[str, Any], *keys: str) -> float:
+    value: Any = row
+    for key in keys:
+        if not isinstance(value, Mapping) or value.get(key) is None:
+            return float("nan")
+        value = value[key]
+    return float(value)
+
+
+def plot_eval(path: str | Path, rows: Sequence[Mapping[str, Any]]) -> Path:
+    """Eval report: per item, front-foot MAE, correlation and beat align score as bars.
+
+    Args:
+        path: output image.
+        rows: one mapping per evaluated item: ``"name"`` plus the keys of
+            `quaddance.play.metrics.dance_metrics` (``front``, ``bas``, ``falls_s``, ...).
+            Missing or None values leave a gap.
+
+    Returns:
+        ``path`` as a Path.
+    """
+    if not rows:
+        raise QuaddanceError("plot_eval needs at least one row")
+    names = [str(row.get("name", f"item {i}")) for i, row in enumerate(rows)]
+    x = np.arange(len(rows))
+    width = 0.2
+    series = [
+        ("fl", "", "FL all", FOOT_COLOURS["FL"], None),
+        ("fl", "_feasible", "FL feasible", FOOT_COLOURS["FL"], "//"),
+        ("fr", "", "FR all", FOOT_COLOURS["FR"], None),
+        ("fr", "_feasible", "FR feasible", FOOT_COLOURS["FR"], "//"),
+    ]
+
+    plt = _pyplot()
+    fig, axes = plt.subplots(
+        3, 1, figsize=(max(6.0, 1.2 * len(rows) + 3.0), 8), sharex=True, constrained_layout=True
+    )
+    for ax, key, label in [(axes[0], "mae", "MAE (cm)"), (axes[1], "corr", "correlation")]:
+        scale = 100.0 if key == "mae" else 1.0
+        for j, (foot, suffix, legend, colour, hatch) in enumerate(series):
+            field = f"mae{suffix}_m" if key == "mae" else f"corr{suffix}"
+            values = [scale * _get(row, "front", foot, field) for row in rows]
+            ax.bar(
+                x + (j - 1.5) * width,
+                values,
+                width,
+                color=colour,
+                hatch=hatch,
+                alpha=0.55 if hatch else 0.9,
+                edgecolor="white",
+                label=legend,
+            )
+        ax.set_ylabel(label)
+        ax.grid(axis="y", alpha=0.3)
+    axes[0].legend(fontsize=8, frameon=False, ncol=4)
+    axes[1].axhline(0.0, color="0.3", lw=0.8)
+    axes[1].set_ylim(-1.0, 1.0)
+
+    bas = [_get(row, "bas") for row in rows]
+    axes[2].bar(x, bas, 0.5, color="tab:gray")
+    for xi, row in zip(x, rows, strict=True):
+        falls = row.get("falls_s") or []
+        if falls:
+            axes[2].annotate(
+                f"{len(falls)} fall(s)", (xi, 0.02), ha="center", fontsize=8, color="tab:red"
+            )
+    axes[2].set_ylabel("beat align score")
+    axes[2].set_ylim(0.0, 1.0)
+    axes[2].set_xticks(x, names, rotation=20, ha="right")
+    axes[2].grid(axis="y", alpha=0.3)
+    _save(fig, path)
+    return Path(path)

@@ -1,0 +1,110 @@
+"""The dance task's settings: one dataclass per concern, defaults naming their source."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from quaddance.sim.scene import SceneCfg
+
+# Table 1 of the paper: (c_f, lambda_f) pairs tried for eq. 2; "table1-5" is the chosen one.
+TABLE1: dict[str, tuple[float, float]] = {
+    "table1-1": (100.0, 100.0),
+    "table1-2": (100.0, 10.0),
+    "table1-3": (60.0, 100.0),
+    "table1-4": (30.0, 100.0),
+    "table1-5": (30.0, 10.0),
+}
+
+
+@dataclass
+class RewardCfg:
+    """Reward weights. Every term is multiplied by the policy step (dt) as in legged_gym,
+    except `termination`, which is paid once."""
+
+    form: str = "paper"  # "paper" = eq. 2 (exp form), "l2" = released code's -c (h - h*)^2
+    c_f: float = 30.0  # eq. 2
+    lambda_f: float = 10.0  # eq. 2
+    c_l2: float = 30.0  # released code's L2 form
+    c_r: float = -30.0  # eq. 3, rear feet (h_rl^2 + h_rr^2)
+    # Ours: eq. 3 is tiny for cm-scale lifts (2 cm -> 0.012), so a linear term keeps the
+    # rear feet down.
+    rear_lift_l1: float = -10.0
+    # Walk These Ways auxiliaries (weights from WTW's Go1 config, scaled for this task).
+    torques: float = -1e-4
+    joint_vel: float = -1e-4
+    joint_acc: float = -2.5e-7
+    action_rate: float = -0.01
+    action_smoothness: float = -0.01
+    collision: float = -5.0
+    base_orientation: float = -1.0
+    base_height: float = -10.0
+    base_height_target_m: float = 0.27
+    joint_limits: float = -10.0
+    foot_slip: float = -0.04
+    base_drift: float = -1.0  # horizontal base velocity: dance in place
+    yaw_rate: float = -0.5
+    termination: float = -200.0  # once per fall; outweighs the discounted penalties it escapes
+
+    @classmethod
+    def named(cls, name: str) -> RewardCfg:
+        """`paper` (eq. 2, c_f 30, lambda_f 10), `l2`, or `table1-1` ... `table1-5`."""
+        if name == "paper":
+            return cls()
+        if name == "l2":
+            return cls(form="l2")
+        if name in TABLE1:
+            c_f, lam = TABLE1[name]
+            return cls(c_f=c_f, lambda_f=lam)
+        raise ValueError(f"unknown reward set {name!r}: use paper, l2 or one of {sorted(TABLE1)}")
+
+
+@dataclass
+class DomainRandCfg:
+    """FACTS.md section 2 (released code), plus pushes. Restitution is not modelled: MuJoCo's
+    soft contacts have no restitution coefficient."""
+
+    enabled: bool = True
+    num_variants: int = 16  # K model variants per engine; each env draws one at reset
+    friction: tuple[float, float] = (0.1, 3.0)
+    added_mass_kg: tuple[float, float] = (-1.0, 3.0)
+    motor_strength: tuple[float, float] = (0.9, 1.1)
+    joint_offset_rad: float = 0.02
+    max_action_lag_substeps: int = 6  # 30 ms at 5 ms physics steps
+    push_interval_s: float = 8.0
+    push_vel_m_s: float = 0.5
+    init_joint_noise_rad: float = 0.1
+
+
+@dataclass
+class ObsCfg:
+    """What the policy sees; see quaddance.sim.observations for the layout."""
+
+    preview_s: tuple[float, ...] = (0.1, 0.2, 0.4)  # ours: upcoming front targets
+    history_len: int = 3  # past proprioceptive frames stacked for the actor
+    privileged_critic: bool = True  # asymmetric critic: friction, mass, strength, velocity
+
+
+@dataclass
+class DanceTaskCfg:
+    """The dance task (one config for both engines, training and playback)."""
+
+    num_envs: int = 256
+    episode_length_s: float = 20.0
+    policy_hz: float = 50.0
+    decimation: int = 4  # released code: 0.005 s x 4
+    action_scale: float = 0.25  # released code
+    hip_scale_factor: float = 0.5  # released code: hips x0.5
+    max_tilt_rad: float = 1.0  # termination
+    min_base_height_m: float = 0.12  # termination
+    scene: SceneCfg = field(default_factory=SceneCfg)
+    rewards: RewardCfg = field(default_factory=RewardCfg)
+    domain_rand: DomainRandCfg = field(default_factory=DomainRandCfg)
+    obs: ObsCfg = field(default_factory=ObsCfg)
+
+    @property
+    def step_dt_s(self) -> float:
+        return 1.0 / self.policy_hz
+
+    @property
+    def max_episode_steps(self) -> int:
+        return round(self.episode_length_s * self.policy_hz)

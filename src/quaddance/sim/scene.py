@@ -1,0 +1,180 @@
+"""The dance scene: mjlab's Go1 on a flat floor, with PD position actuators and sensors.
+
+One MJCF for every engine (native MuJoCo, MuJoCo Warp) and for rendering, built from mjlab's
+shipped `go1.xml` and cached per setting.
+"""
+
+from __future__ import annotations
+
+import copy
+import functools
+import importlib.util
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from quaddance.sim import go1
+
+
+@dataclass(frozen=True)
+class SceneCfg:
+    """Physics settings of the scene."""
+
+    timestep_s: float = 0.005  # released code: sim dt 0.005 s
+    kp: float = 20.0  # released code (the paper's text says kp 20)
+    kd: float = 0.5  # released code (the paper's text says 5)
+    foot_friction: float = 1.0
+    solver_iterations: int = 8
+    ls_iterations: int = 8
+
+
+def _go1_xml_path() -> str:
+    # Located without importing mjlab, whose package import pulls in warp (seconds).
+    spec = importlib.util.find_spec("mjlab")
+    if spec is None or not spec.submodule_search_locations:
+        raise ImportError("mjlab is not installed; it ships the Go1 model (pip install mjlab)")
+    root = Path(next(iter(spec.submodule_search_locations)))
+    return str(root / "asset_zoo" / "robots" / "unitree_go1" / "xmls" / "go1.xml")
+
+
+def build_spec(cfg: SceneCfg = SceneCfg(), visual: bool = True) -> mujoco.MjSpec:
+    """Go1 + floor + actuators + sensors as an editable spec.
+
+    ``visual=False`` drops the visual meshes (39 MB of model buffer): the dynamics are the
+    same because every body has an explicit inertial and visual geoms never collide.
+    """
+    spec = mujoco.MjSpec.from_file(_go1_xml_path())
+    # Our own sensors replace the model's IMU sensors (one fewer thing to compute per step).
+    for sensor in list(spec.sensors):
+        spec.delete(sensor)
+    if not visual:
+        for geom in list(spec.geoms):
+            if geom.type == mujoco.mjtGeom.mjGEOM_MESH:
+                spec.delete(geom)
+        for mesh in list(spec.meshes):
+            spec.delete(mesh)
+    spec.option.timestep = cfg.timestep_s
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    spec.option.iterations = cfg.solver_iterations
+    spec.option.ls_iterations = cfg.ls_iterations
+    spec.visual.global_.offwidth = 1280
+    spec.visual.global_.offheight = 720
+
+    # Floor: a checker plane. Robot geoms collide with the floor only (no self-collision):
+    # robot contype=1/conaffinity=0, floor conaffinity=1.
+    tex = spec.add_texture(
+        name="grid",
+        type=mujoco.mjtTexture.mjTEXTURE_2D,
+        builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER,
+        width=512,
+        height=512,
+        rgb1=[0.82, 0.82, 0.86],
+        rgb2=[0.70, 0.70, 0.76],
+    )
+    mat = spec.add_material(name="floor", texrepeat=[4, 4], reflectance=0.0)
+    mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = tex.name
+    spec.add_texture(
+        name="sky",
+        type=mujoco.mjtTexture.mjTEXTURE_SKYBOX,
+        builtin=mujoco.mjtBuiltin.mjBUILTIN_GRADIENT,
+        width=256,
+        height=256,
+        rgb1=[0.35, 0.45, 0.65],
+        rgb2=[0.05, 0.05, 0.12],
+    )
+    world = spec.worldbody
+    world.add_geom(
+        name="floor",
+        type=mujoco.mjtGeom.mjGEOM_PLANE,
+        size=[0, 0, 0.05],
+        material="floor",
+        contype=1,
+        conaffinity=1,
+        condim=3,
+    )
+    world.add_light(
+        pos=[0, 0, 3],
+        dir=[0, 0, -1],
+        diffuse=[0.6, 0.6, 0.6],
+        type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL,
+    )
+
+    for geom in spec.geoms:
+        if geom.name.endswith("_collision") or "_collision" in geom.name:
+            geom.contype, geom.conaffinity, geom.condim = 1, 0, 3
+            if geom.name.endswith("_foot_collision"):
+                geom.friction = [cfg.foot_friction, 0.005, 0.0001]
+                geom.priority = 1
+
+    for name in go1.JOINT_NAMES:
+        joint = spec.joint(name)
+        is_knee = name.endswith("calf_joint")
+        joint.armature = go1.KNEE_ARMATURE if is_knee else go1.HIP_ARMATURE
+        effort = go1.KNEE_EFFORT_NM if is_knee else go1.HIP_EFFORT_NM
+        act = spec.add_actuator(name=name.removesuffix("_joint"), target=name)
+        act.trntype = mujoco.mjtTrn.mjTRN_JOINT
+        act.set_to_position(kp=cfg.kp, kv=cfg.kd)
+        act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        act.forcerange = [-effort, effort]
+
+    # Sensors, read by every engine in this order (see quaddance.sim.state.SensorLayout).
+    for foot in go1.FEET:
+        spec.add_sensor(
+            name=f"{foot}_pos",
+            type=mujoco.mjtSensor.mjSENS_FRAMEPOS,
+            objtype=mujoco.mjtObj.mjOBJ_SITE,
+            objname=foot,
+        )
+    for foot in go1.FEET:
+        spec.add_sensor(
+            name=f"{foot}_vel",
+            type=mujoco.mjtSensor.mjSENS_FRAMELINVEL,
+            objtype=mujoco.mjtObj.mjOBJ_SITE,
+            objname=foot,
+        )
+    for name in go1.JOINT_NAMES:
+        spec.add_sensor(
+            name=f"{name}_torque",
+            type=mujoco.mjtSensor.mjSENS_ACTUATORFRC,
+            objtype=mujoco.mjtObj.mjOBJ_ACTUATOR,
+            objname=name.removesuffix("_joint"),
+        )
+    # Contacts with the floor of the trunk (termination) and of the thighs and the upper calf
+    # capsules near the knees (collision penalty); the calf bodies also hold the feet.
+    contacts = [("trunk", mujoco.mjtObj.mjOBJ_BODY, "trunk")]
+    for leg in go1.MODEL_LEGS:
+        contacts.append((f"{leg}_thigh", mujoco.mjtObj.mjOBJ_BODY, f"{leg}_thigh"))
+        contacts.append((f"{leg}_knee", mujoco.mjtObj.mjOBJ_GEOM, f"{leg}_calf_collision1"))
+    for name, objtype, objname in contacts:
+        spec.add_sensor(
+            name=f"{name}_contact",
+            type=mujoco.mjtSensor.mjSENS_CONTACT,
+            objtype=objtype,
+            objname=objname,
+            reftype=mujoco.mjtObj.mjOBJ_GEOM,
+            refname="floor",
+            intprm=[1, 0, 1],  # data="found", no reduction, num=1
+        )
+    # Nominal standing pose as the "home" keyframe.
+    qpos = np.zeros(7 + go1.NUM_JOINTS)
+    qpos[2] = go1.INIT_BASE_HEIGHT_M
+    qpos[3] = 1.0
+    qpos[7:] = go1.nominal_joint_pos()
+    spec.add_key(name="home", qpos=qpos.tolist(), ctrl=go1.nominal_joint_pos())
+    return spec
+
+
+@functools.lru_cache(maxsize=8)
+def _compiled(cfg: SceneCfg, visual: bool) -> mujoco.MjModel:
+    return build_spec(cfg, visual).compile()
+
+
+def build_model(cfg: SceneCfg = SceneCfg(), visual: bool = False) -> mujoco.MjModel:
+    """A fresh MjModel of the scene; compiled once per setting, then copied.
+
+    Physics (training, playback) uses ``visual=False``; the renderer uses ``visual=True``.
+    Both have the same bodies, joints, actuators, sensors and therefore the same qpos layout.
+    """
+    return copy.deepcopy(_compiled(cfg, visual))

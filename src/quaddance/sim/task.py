@@ -1,0 +1,259 @@
+"""The dance task: a Go1 tracks front-foot height targets while its rear feet stay down.
+
+Written once over batched torch tensors (`RobotState`); the physics comes from an engine
+(`cpu`: native MuJoCo, `gpu`: MuJoCo Warp). Training (rsl-rl's VecEnv interface) and
+playback (one env, no randomisation) use this same class.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+from rsl_rl.env import VecEnv
+from tensordict import TensorDict
+
+from quaddance.sim import go1, observations, rewards, terminations
+from quaddance.sim.config import DanceTaskCfg
+from quaddance.sim.engines import NOMINAL_DYNAMICS, make_engine
+from quaddance.sim.state import RobotState, state_from_arrays
+
+
+def sample_dynamics(cfg: DanceTaskCfg, rng: np.random.Generator) -> np.ndarray:
+    """K dynamics variants (friction, added mass kg, motor strength) drawn uniformly."""
+    dr = cfg.domain_rand
+    if not dr.enabled:
+        return NOMINAL_DYNAMICS.copy()
+    k = dr.num_variants
+    rows = np.stack(
+        [
+            rng.uniform(*dr.friction, k),
+            rng.uniform(*dr.added_mass_kg, k),
+            rng.uniform(*dr.motor_strength, k),
+        ],
+        axis=1,
+    )
+    rows[0] = NOMINAL_DYNAMICS[0]  # always keep the nominal robot among the variants
+    return rows
+
+
+class DanceEnv(VecEnv):
+    """Vectorised dance task. `bank` (B, L, 4) holds target sequences at the policy rate."""
+
+    def __init__(
+        self,
+        cfg: DanceTaskCfg,
+        bank: torch.Tensor | np.ndarray,
+        engine: str = "cpu",
+        seed: int = 0,
+        random_start: bool = True,
+        compute_rewards: bool = True,
+    ) -> None:
+        self.cfg = cfg
+        # Playback needs the same observations, dynamics and terminations but no rewards.
+        self.compute_rewards = compute_rewards
+        self.num_envs = cfg.num_envs
+        self.num_actions = go1.NUM_JOINTS
+        self.max_episode_length = cfg.max_episode_steps
+        self._rng = np.random.default_rng(seed)
+        self._gen = torch.Generator().manual_seed(seed)
+        if abs(cfg.scene.timestep_s * cfg.decimation - cfg.step_dt_s) > 1e-9:
+            raise ValueError("scene.timestep_s * decimation must equal 1 / policy_hz")
+        self.engine = make_engine(engine, cfg.num_envs, cfg.scene, sample_dynamics(cfg, self._rng))
+        self.device = self.engine.device
+        dev = self.device
+        self._variants = torch.as_tensor(self.engine.variants, dtype=torch.float32, device=dev)
+
+        bank_t = torch.as_tensor(np.asarray(bank), dtype=torch.float32)
+        if bank_t.ndim != 3 or bank_t.shape[2] != 4:
+            raise ValueError(f"target bank must be (B, L, 4), got {tuple(bank_t.shape)}")
+        self.bank = bank_t.to(dev)
+        self.random_start = random_start
+        self.preview_steps = [round(s * cfg.policy_hz) for s in cfg.obs.preview_s]
+
+        model = self.engine.model
+        self.nominal_joint_pos = torch.tensor(go1.nominal_joint_pos(), device=dev)
+        self.home_qpos = torch.tensor(model.key("home").qpos, dtype=torch.float32, device=dev)
+        scale = torch.full((go1.NUM_JOINTS,), cfg.action_scale, device=dev)
+        scale[0::3] *= cfg.hip_scale_factor  # hips are every third joint in model order
+        self.action_scale = scale
+        lo = torch.tensor(model.jnt_range[1:, 0], dtype=torch.float32, device=dev)
+        hi = torch.tensor(model.jnt_range[1:, 1], dtype=torch.float32, device=dev)
+        mid, half = (lo + hi) / 2, (hi - lo) / 2 * 0.9
+        self.soft_joint_limits = (mid - half, mid + half)
+
+        n, j = self.num_envs, go1.NUM_JOINTS
+        z = lambda *shape: torch.zeros(*shape, device=dev)  # noqa: E731
+        self.episode_length_buf = torch.zeros(n, dtype=torch.long, device=dev)
+        self.bank_idx = torch.zeros(n, dtype=torch.long, device=dev)
+        self.bank_offset = torch.zeros(n, dtype=torch.long, device=dev)
+        self.last_action, self.prev_action, self.prev_prev_action = z(n, j), z(n, j), z(n, j)
+        self.prev_joint_vel = z(n, j)
+        self._target_hist = self.nominal_joint_pos.repeat(n, 3, 1)  # joint targets t, t-1, t-2
+        self.action_lag = torch.zeros(n, dtype=torch.long, device=dev)
+        self.joint_offset = z(n, j)
+        self.dynamics = self._variants[torch.zeros(n, dtype=torch.long, device=dev)]
+        self.history = z(n, cfg.obs.history_len, observations.PROPRIO_DIM)
+        self.robot: RobotState = self._read_state()
+        self.reset_all()
+
+    # --- targets ---------------------------------------------------------------------------
+    def targets_at(self, ahead_steps: int) -> torch.Tensor:
+        """(N, 4) targets `ahead_steps` policy steps from now (held at the sequence's end)."""
+        t = (self.bank_offset + self.episode_length_buf + ahead_steps).clamp(
+            max=self.bank.shape[1] - 1
+        )
+        return self.bank[self.bank_idx, t]
+
+    # --- VecEnv interface ----------------------------------------------------------------------
+    def get_observations(self) -> TensorDict:
+        prop = observations.proprio(self)
+        actor = torch.cat(
+            [
+                prop,
+                self.history.flatten(1),
+                observations.front_targets_now(self),
+                observations.front_targets_preview(self),
+            ],
+            dim=1,
+        )
+        groups = {"actor": actor}
+        if self.cfg.obs.privileged_critic:
+            groups["critic"] = torch.cat([actor, observations.privileged(self)], dim=1)
+        else:
+            groups["critic"] = actor
+        return TensorDict(groups, batch_size=[self.num_envs], device=self.device)
+
+    def step(self, actions: torch.Tensor) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
+        cfg = self.cfg
+        actions = actions.to(self.device).clamp(-10.0, 10.0)
+        # History of what the policy saw, before the state changes.
+        if cfg.obs.history_len:
+            self.history = torch.cat(
+                [observations.proprio(self).unsqueeze(1), self.history[:, :-1]], dim=1
+            )
+        self.prev_prev_action, self.prev_action = self.prev_action, self.last_action
+        self.last_action = actions
+        self.prev_joint_vel = self.robot.joint_vel
+        target = self.nominal_joint_pos + self.action_scale * actions
+        self._target_hist = torch.cat([target.unsqueeze(1), self._target_hist[:, :2]], dim=1)
+        self.robot = self._read_state(self.engine.step(self._lagged_controls()))
+        self.episode_length_buf += 1
+
+        fell = terminations.fell(self)
+        time_out = terminations.time_out(self) & ~fell
+        self._push()
+        done = fell | time_out
+        extras: dict = {"time_outs": time_out}
+        if self.compute_rewards:
+            reward, terms = self._reward(fell)
+            extras["log"] = self._log(terms, fell, done)
+        else:
+            reward = torch.zeros(self.num_envs, device=self.device)
+        if done.any():
+            self.reset_envs(done.nonzero().squeeze(1))
+        return self.get_observations(), reward, done, extras
+
+    # --- internals -------------------------------------------------------------------------------
+    def _lagged_controls(self) -> torch.Tensor:
+        """(N, decimation, 12) joint targets per physics substep, delayed by each env's lag.
+
+        The target applied at substep j of this step is the one computed ceil((lag - j) / D)
+        policy steps ago (D = decimation), so a lag of 6 substeps is 30 ms.
+        """
+        d = self.cfg.decimation
+        j = torch.arange(d, device=self.device)
+        back = torch.div(self.action_lag[:, None] - j[None, :] + d - 1, d, rounding_mode="floor")
+        back = back.clamp(0, self._target_hist.shape[1] - 1)
+        return torch.gather(self._target_hist, 1, back[..., None].expand(-1, -1, go1.NUM_JOINTS))
+
+    def _read_state(self, out=None) -> RobotState:
+        out = out if out is not None else self.engine.read()
+        return state_from_arrays(out.qpos, out.qvel, out.sensordata, self.engine.layout)
+
+    def _reward(self, fell: torch.Tensor) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        cfg = self.cfg.rewards
+        dt = self.cfg.step_dt_s
+        total = torch.zeros(self.num_envs, device=self.device)
+        terms = {}
+        for name, (fn, weight_attr) in rewards.TERMS.items():
+            w = 1.0 if weight_attr is None else getattr(cfg, weight_attr)
+            if w == 0.0:
+                continue
+            value = w * fn(self) * dt
+            terms[name] = value
+            total += value
+        terms["termination"] = cfg.termination * fell.float()
+        total += terms["termination"]
+        return total, terms
+
+    def _log(self, terms: dict, fell: torch.Tensor, done: torch.Tensor) -> dict:
+        front_err = (self.robot.foot_height_m[:, :2] - self.targets_at(0)[:, :2]).abs().mean(1)
+        return {
+            **{f"/reward/{k}": v.mean() for k, v in terms.items()},
+            "/metrics/front_abs_err_m": front_err.mean(),
+            "/metrics/rear_lift_m": self.robot.foot_height_m[:, 2:].clamp(min=0).mean(),
+            "/metrics/falls": fell.float().sum(),
+            "/metrics/episodes_ended": done.float().sum(),
+        }
+
+    def _push(self) -> None:
+        dr = self.cfg.domain_rand
+        if not dr.enabled or dr.push_vel_m_s <= 0:
+            return
+        every = max(1, round(dr.push_interval_s * self.cfg.policy_hz))
+        ids = (self.episode_length_buf % every == 0).nonzero().squeeze(1)
+        if ids.numel() == 0:
+            return
+        qvel = torch.cat(
+            [self.robot.base_lin_vel_w, self.robot.base_ang_vel_b, self.robot.joint_vel], dim=1
+        )[ids]
+        kick = (torch.rand(ids.numel(), 2, generator=self._gen) * 2 - 1) * dr.push_vel_m_s
+        qvel[:, :2] += kick.to(self.device)
+        self.engine.set_velocity(ids, qvel)
+
+    def reset_all(self) -> None:
+        self.reset_envs(torch.arange(self.num_envs, device=self.device))
+
+    def reset_envs(self, ids: torch.Tensor) -> None:
+        """New pose, dynamics variant, calibration offsets, lag and target sequence."""
+        n, dr, dev = ids.numel(), self.cfg.domain_rand, self.device
+        rand = lambda *shape: torch.rand(*shape, generator=self._gen).to(dev)  # noqa: E731
+        qpos = self.home_qpos.repeat(n, 1)
+        qvel = torch.zeros(n, self.engine.nv, device=dev)
+        if dr.enabled:
+            qpos[:, 7:] += (rand(n, go1.NUM_JOINTS) * 2 - 1) * dr.init_joint_noise_rad
+            variant = torch.randint(len(self._variants), (n,), generator=self._gen).to(dev)
+            self.joint_offset[ids] = (rand(n, go1.NUM_JOINTS) * 2 - 1) * dr.joint_offset_rad
+            self.action_lag[ids] = torch.randint(
+                dr.max_action_lag_substeps + 1, (n,), generator=self._gen
+            ).to(dev)
+        else:
+            variant = torch.zeros(n, dtype=torch.long, device=dev)
+        self.engine.set_variants(ids, variant)
+        self.dynamics[ids] = self._variants[variant]
+        self.bank_idx[ids] = torch.randint(self.bank.shape[0], (n,), generator=self._gen).to(dev)
+        span = self.bank.shape[1] - self.max_episode_length - max(self.preview_steps, default=0)
+        if self.random_start and span > 0:
+            self.bank_offset[ids] = torch.randint(span, (n,), generator=self._gen).to(dev)
+        else:
+            self.bank_offset[ids] = 0
+        self.episode_length_buf[ids] = 0
+        for buf in (self.last_action, self.prev_action, self.prev_prev_action, self.prev_joint_vel):
+            buf[ids] = 0.0
+        self._target_hist[ids] = qpos[:, 7:].unsqueeze(1).expand(-1, 3, -1)
+        self.engine.reset(ids, qpos, qvel)
+        self.robot = self._read_state()
+        if self.cfg.obs.history_len:
+            self.history[ids] = observations.proprio(self)[ids].unsqueeze(1)
+
+    @property
+    def obs_layout(self) -> dict:
+        return observations.observation_layout(
+            self.cfg.obs.history_len, len(self.preview_steps), self.cfg.obs.privileged_critic
+        )
+
+
+def episode_steps(duration_s: float, policy_hz: float) -> int:
+    return math.ceil(duration_s * policy_hz)

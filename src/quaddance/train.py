@@ -1,0 +1,391 @@
+"""PPO training of the dance task with rsl-rl: presets, checkpoints, resume, ONNX export.
+
+A run directory holds `checkpoint.pt` (written atomically every few minutes and at the end),
+`bank.npy` (the target bank, rebuilt from its seed if missing), `curve.csv` (the learning
+curve), TensorBoard logs under `tb/`, and at the end `policy.onnx` + `policy.json`.
+"""
+
+from __future__ import annotations
+
+import copy
+import csv
+import dataclasses
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from quaddance import __version__
+from quaddance.errors import InputFileError, QuaddanceError
+from quaddance.fileio import atomic_path, write_json
+from quaddance.sim import go1
+from quaddance.sim.config import DanceTaskCfg, RewardCfg
+
+
+@dataclass(frozen=True)
+class Preset:
+    """Network sizes and PPO batch settings."""
+
+    actor_hidden: tuple[int, ...]
+    critic_hidden: tuple[int, ...]
+    num_envs: int
+    num_steps_per_env: int
+    num_learning_epochs: int
+    num_mini_batches: int
+
+
+PRESETS: dict[str, Preset] = {
+    # The paper / released code (FACTS.md section 1-2): for GPUs.
+    "paper": Preset((512, 256, 128), (512, 256, 128), 4096, 24, 5, 4),
+    # Chosen by measurement on 2 cores (`quaddance bench train`): learning, not physics,
+    # bounds CPU training, so smaller networks, fewer epochs and bigger mini-batches.
+    "cpu": Preset((256, 128, 64), (256, 128, 64), 256, 24, 3, 2),
+}
+
+
+@dataclass
+class TrainCfg:
+    run_dir: Path = Path("runs/dance")
+    engine: str = "cpu"
+    preset: str = "cpu"
+    num_envs: int | None = None  # None: the preset's
+    iterations: int = 1000
+    reward: str = "paper"
+    seed: int = 1
+    resume: bool = False
+    bank_size: int = 256
+    bank_duration_s: float = 32.0
+    max_height_m: float | None = None  # feasible target bound; None: targets' default
+    checkpoint_every_s: float = 120.0
+    torch_threads: int | None = None
+    learning_rate: float = 1e-3  # FACTS.md section 1
+    entropy_coef: float = 0.01
+    task: DanceTaskCfg = field(default_factory=DanceTaskCfg)
+
+
+def rsl_rl_cfg(preset: Preset, cfg: TrainCfg) -> dict:
+    """The dict rsl-rl's PPO expects (gamma, lambda, clip from FACTS.md section 1)."""
+    return {
+        "num_steps_per_env": preset.num_steps_per_env,
+        "obs_groups": {"actor": ["actor"], "critic": ["critic"]},
+        "multi_gpu": None,
+        "algorithm": {
+            "class_name": "PPO",
+            "num_learning_epochs": preset.num_learning_epochs,
+            "num_mini_batches": preset.num_mini_batches,
+            "clip_param": 0.2,
+            "gamma": 0.99,
+            "lam": 0.95,
+            "value_loss_coef": 1.0,
+            "entropy_coef": cfg.entropy_coef,
+            "learning_rate": cfg.learning_rate,
+            "max_grad_norm": 1.0,
+            "use_clipped_value_loss": True,
+            "schedule": "adaptive",
+            "desired_kl": 0.01,
+            "rnd_cfg": None,
+            "symmetry_cfg": None,
+        },
+        "actor": {
+            "class_name": "MLPModel",
+            "hidden_dims": list(preset.actor_hidden),
+            "activation": "elu",
+            "obs_normalization": True,
+            "distribution_cfg": {
+                "class_name": "GaussianDistribution",
+                "init_std": 1.0,
+                "std_type": "scalar",
+            },
+        },
+        "critic": {
+            "class_name": "MLPModel",
+            "hidden_dims": list(preset.critic_hidden),
+            "activation": "elu",
+            "obs_normalization": True,
+        },
+    }
+
+
+def build_bank(cfg: TrainCfg, progress=None) -> np.ndarray:
+    """The target bank: built-in choreographies of synthetic songs, cached in the run dir."""
+    from quaddance.pipeline import target_bank
+    from quaddance.targets import TargetConfig
+
+    path = cfg.run_dir / "bank.npy"
+    if path.exists():
+        bank = np.load(path, allow_pickle=False)
+        if bank.ndim == 3 and bank.shape[2] == 4:
+            return bank
+    tcfg = (
+        TargetConfig() if cfg.max_height_m is None else TargetConfig(max_height_m=cfg.max_height_m)
+    )
+    bank = target_bank(
+        cfg.bank_size, cfg.bank_duration_s, seed=cfg.seed, cfg=tcfg, progress=progress
+    )
+    with atomic_path(path) as tmp:
+        np.save(tmp, bank)
+    return bank
+
+
+def _config_dict(cfg: TrainCfg) -> dict:
+    d = dataclasses.asdict(cfg)
+    d["run_dir"] = str(cfg.run_dir)
+    return d
+
+
+class Trainer:
+    """Owns the env, the PPO algorithm and the run directory."""
+
+    def __init__(self, cfg: TrainCfg, bank: np.ndarray | None = None, log=print) -> None:
+        from quaddance.sim.task import DanceEnv
+
+        self.cfg = cfg
+        self.log = log
+        if cfg.preset not in PRESETS:
+            raise QuaddanceError(f"unknown preset {cfg.preset!r}: use {sorted(PRESETS)}")
+        self.preset = PRESETS[cfg.preset]
+        if cfg.torch_threads:
+            torch.set_num_threads(cfg.torch_threads)
+        torch.manual_seed(cfg.seed)
+        task = copy.deepcopy(cfg.task)
+        task.num_envs = cfg.num_envs or self.preset.num_envs
+        task.rewards = RewardCfg.named(cfg.reward)
+        self.task_cfg = task
+        cfg.run_dir.mkdir(parents=True, exist_ok=True)
+        self.bank = build_bank(cfg) if bank is None else bank
+        self.env = DanceEnv(task, self.bank, engine=cfg.engine, seed=cfg.seed)
+        self.device = str(self.env.device)
+
+        from rsl_rl.algorithms import PPO
+
+        self.alg_cfg = rsl_rl_cfg(self.preset, cfg)
+        obs = self.env.get_observations()
+        self.alg = PPO.construct_algorithm(obs, self.env, copy.deepcopy(self.alg_cfg), self.device)
+        self.iteration = 0
+        self.env_steps = 0
+        self.wall_s = 0.0
+        self.ckpt_path = cfg.run_dir / "checkpoint.pt"
+        if cfg.resume:
+            self._load(self.ckpt_path)
+
+    # --- checkpoints -------------------------------------------------------------------------
+    def save(self) -> None:
+        """Everything needed to continue: models, optimizer, normalizers, counters, RNG."""
+        state = self.alg.save()
+        state.update(
+            iteration=self.iteration,
+            env_steps=self.env_steps,
+            wall_s=self.wall_s,
+            torch_rng=torch.get_rng_state(),
+            env_rng=self.env._gen.get_state(),
+            config_json=json.dumps(_config_dict(self.cfg), default=str),
+            version=__version__,
+        )
+        with atomic_path(self.ckpt_path) as tmp:
+            torch.save(state, tmp)
+
+    def _load(self, path: Path) -> None:
+        if not path.exists():
+            raise InputFileError(path, "no checkpoint to resume from (train without --resume)")
+        try:
+            # weights_only: tensors and plain containers only, never arbitrary objects.
+            state = torch.load(path, map_location=self.device, weights_only=True)
+            self.alg.load(state, None, strict=True)
+        except (RuntimeError, KeyError, EOFError) as err:
+            raise InputFileError(path, f"not a usable checkpoint for this task ({err})") from err
+        self.iteration = int(state["iteration"])
+        self.env_steps = int(state["env_steps"])
+        self.wall_s = float(state["wall_s"])
+        torch.set_rng_state(state["torch_rng"])
+        self.env._gen.set_state(state["env_rng"])
+        self.log(f"resumed {path} at iteration {self.iteration} ({self.env_steps:,} env steps)")
+
+    # --- learning ------------------------------------------------------------------------------
+    def learn(self, iterations: int, progress: bool = True) -> list[dict]:
+        """Run `iterations` more PPO iterations; returns the learning-curve rows."""
+        from torch.utils.tensorboard import SummaryWriter
+
+        writer = SummaryWriter(log_dir=str(self.cfg.run_dir / "tb"), purge_step=self.iteration)
+        curve_path = self.cfg.run_dir / "curve.csv"
+        rows: list[dict] = []
+        obs = self.env.get_observations().to(self.device)
+        self.alg.train_mode()
+        steps = self.preset.num_steps_per_env
+        last_ckpt = time.monotonic()
+        bar = _progress_bar(progress)
+        task_id = bar.add_task("training", total=iterations) if bar else None
+        if bar:
+            bar.start()
+        try:
+            for _ in range(iterations):
+                t0 = time.monotonic()
+                sums: dict[str, float] = {}
+                ep_reward = torch.zeros(self.env.num_envs, device=self.device)
+                with torch.inference_mode():
+                    for _ in range(steps):
+                        actions = self.alg.act(obs)
+                        obs, rew, dones, extras = self.env.step(actions)
+                        self.alg.process_env_step(obs, rew, dones, extras)
+                        ep_reward += rew
+                        for k, v in extras["log"].items():
+                            sums[k] = sums.get(k, 0.0) + float(v)
+                    self.alg.compute_returns(obs)
+                t1 = time.monotonic()
+                losses = self.alg.update()
+                t2 = time.monotonic()
+                self.iteration += 1
+                self.env_steps += steps * self.env.num_envs
+                self.wall_s += t2 - t0
+                row = self._curve_row(sums, steps, ep_reward, losses, t1 - t0, t2 - t1)
+                rows.append(row)
+                for k, v in row.items():
+                    if k not in ("iteration",):
+                        writer.add_scalar(k, v, self.iteration)
+                _append_csv(curve_path, row)
+                if bar:
+                    bar.update(
+                        task_id,
+                        advance=1,
+                        description=(
+                            f"it {self.iteration} | reward/step {row['reward_per_step']:.3f} | "
+                            f"front err {100 * row['front_abs_err_m']:.1f} cm | "
+                            f"falls/ep {row['fall_rate']:.2f} | "
+                            f"{row['env_steps_per_s']:.0f} steps/s"
+                        ),
+                    )
+                if time.monotonic() - last_ckpt > self.cfg.checkpoint_every_s:
+                    self.save()
+                    self.export()  # a usable policy at every checkpoint, not only at the end
+                    last_ckpt = time.monotonic()
+        finally:
+            if bar:
+                bar.stop()
+            self.save()
+            writer.close()
+        return rows
+
+    def _curve_row(self, sums, steps, ep_reward, losses, collect_s, learn_s) -> dict:
+        ended = sums.get("/metrics/episodes_ended", 0.0)
+        falls = sums.get("/metrics/falls", 0.0)
+        n = self.env.num_envs
+        return {
+            "iteration": self.iteration,
+            "env_steps": self.env_steps,
+            "wall_s": round(self.wall_s, 2),
+            "reward_per_step": float(ep_reward.mean()) / steps,
+            "front_abs_err_m": sums.get("/metrics/front_abs_err_m", 0.0) / steps,
+            "rear_lift_m": sums.get("/metrics/rear_lift_m", 0.0) / steps,
+            # falls per ended episode; also per env-minute, which stays defined when none end
+            "fall_rate": falls / ended if ended else 0.0,
+            "falls_per_env_min": falls / (n * steps * self.task_cfg.step_dt_s / 60.0),
+            "env_steps_per_s": steps * n / max(collect_s + learn_s, 1e-9),
+            "collect_s": collect_s,
+            "learn_s": learn_s,
+            "value_loss": float(losses.get("value", losses.get("value_function", math.nan))),
+            "surrogate_loss": float(losses.get("surrogate", math.nan)),
+            "action_std": float(self.alg.get_policy().output_std.detach().mean()),
+        }
+
+    # --- export ------------------------------------------------------------------------------
+    def export(self, out_dir: Path | None = None) -> tuple[Path, Path]:
+        """Write `policy.onnx` and `policy.json` (what playback and deployment need)."""
+        out_dir = out_dir or self.cfg.run_dir
+        onnx_path, json_path = out_dir / "policy.onnx", out_dir / "policy.json"
+        export_onnx(self.alg.get_policy(), onnx_path)
+        write_json(json_path, policy_metadata(self.env, self.cfg, self))
+        return onnx_path, json_path
+
+
+def export_onnx(policy, path: Path) -> None:
+    """Deterministic actor (normaliser included) as ONNX: input `obs` (B, D) -> `actions`."""
+    model = policy.as_onnx(verbose=False).to("cpu").eval()
+    with atomic_path(path) as tmp:
+        torch.onnx.export(
+            model,
+            model.get_dummy_inputs(),
+            str(tmp),
+            export_params=True,
+            opset_version=18,
+            input_names=model.input_names,
+            output_names=model.output_names,
+            dynamo=False,
+            dynamic_axes={name: {0: "batch"} for name in (*model.input_names, *model.output_names)},
+        )
+
+
+def policy_metadata(env, cfg: TrainCfg, trainer: Trainer | None = None) -> dict:
+    """The policy's contract with playback and a real robot."""
+    task = env.cfg
+    return {
+        "format": "quaddance-policy/1",
+        "version": __version__,
+        "robot": "unitree_go1",
+        "joint_names": list(go1.JOINT_NAMES),
+        "feet": list(go1.FEET),
+        "foot_height": "height of the foot sphere's bottom above the floor, m",
+        "nominal_joint_pos_rad": go1.nominal_joint_pos(),
+        "action_scale": env.action_scale.cpu().tolist(),
+        "joint_target": "nominal_joint_pos_rad + action_scale * action",
+        "kp": task.scene.kp,
+        "kd": task.scene.kd,
+        "policy_hz": task.policy_hz,
+        "sim_dt_s": task.scene.timestep_s,
+        "decimation": task.decimation,
+        "obs": {
+            "layout": env.obs_layout["actor"],
+            "dim": env.obs_layout["actor_dim"],
+            "preview_s": list(task.obs.preview_s),
+            "history_len": task.obs.history_len,
+            "normalization": "inside the ONNX model (running mean/std)",
+        },
+        "task": _config_dict(cfg)["task"],
+        "training": {
+            "engine": cfg.engine,
+            "preset": cfg.preset,
+            "reward": cfg.reward,
+            "iterations": trainer.iteration if trainer else None,
+            "env_steps": trainer.env_steps if trainer else None,
+            "wall_s": round(trainer.wall_s, 1) if trainer else None,
+            "num_envs": env.num_envs,
+            "seed": cfg.seed,
+        },
+    }
+
+
+def _append_csv(path: Path, row: dict) -> None:
+    new = not path.exists()
+    with path.open("a", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(row))
+        if new:
+            w.writeheader()
+        w.writerow(row)
+
+
+def _progress_bar(enabled: bool):
+    if not enabled:
+        return None
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeRemainingColumn,
+    )
+
+    return Progress(
+        TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn()
+    )
+
+
+def train(cfg: TrainCfg, progress: bool = True, log=print) -> Trainer:
+    """Train (or continue) and export; returns the trainer."""
+    trainer = Trainer(cfg, log=log)
+    todo = cfg.iterations - trainer.iteration if cfg.resume else cfg.iterations
+    if todo > 0:
+        trainer.learn(todo, progress=progress)
+    trainer.export()
+    return trainer
