@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 from pathlib import Path
 from typing import Annotated
@@ -53,8 +54,9 @@ def choreograph_cmd(
     h0: Annotated[float, typer.Option(help="paper mode: eq. 4's h0, m (paper: 2).")] = 2.0,
     scale: Annotated[float, typer.Option(help="minmax mode: scale s (released code).")] = 1.0,
     max_height: Annotated[
-        float, typer.Option(help="feasible mode: highest front-foot target, m.")
-    ] = 0.20,
+        float | None,
+        typer.Option(help="feasible mode: highest front-foot target, m (default 0.30, measured)."),
+    ] = None,
     seed: Annotated[int, typer.Option(help="Choreographer seed: another seed, another dance.")] = 0,
     style: Annotated[
         str, typer.Option(help="Choreographer style: mixed, calm, energetic or footwork.")
@@ -77,7 +79,9 @@ def choreograph_cmd(
     for path in (song, motion):
         if path is not None and not path.is_file():
             raise InputFileError(path, "no such file")
-    cfg = TargetConfig(mode=mode, h0_m=h0, scale=scale, max_height_m=max_height)
+    cfg = TargetConfig(mode=mode, h0_m=h0, scale=scale)
+    if max_height is not None:
+        cfg = dataclasses.replace(cfg, max_height_m=max_height)
     console = Console(stderr=True)
     with console.status("Analysing the music and choreographing..."):
         dance, analysis = make_dance(
@@ -135,6 +139,10 @@ def train_cmd(
         float | None, typer.Option(help="Highest front-foot target in the bank, m.")
     ] = None,
     checkpoint_every: Annotated[float, typer.Option(help="Seconds between checkpoints.")] = 120.0,
+    minutes: Annotated[
+        float | None, typer.Option(help="Stop (checkpoint and export) after this many minutes.")
+    ] = None,
+    progress: Annotated[bool, typer.Option(help="Show a progress bar.")] = True,
 ) -> None:
     """Train the dance policy with PPO; exports RUN_DIR/policy.onnx and policy.json."""
     from rich.console import Console
@@ -163,13 +171,14 @@ def train_cmd(
         bank_size=bank_size,
         max_height_m=max_height,
         checkpoint_every_s=checkpoint_every,
+        max_minutes=minutes,
     )
     with console.status("Building the target bank (first run only) and the envs..."):
         from quaddance.train import build_bank
 
         run_dir.mkdir(parents=True, exist_ok=True)
         build_bank(cfg)
-    trainer = train(cfg, log=console.print)
+    trainer = train(cfg, log=console.print, progress=progress)
     console.print(
         f"done: {trainer.iteration} iterations, {trainer.env_steps:,} env steps, "
         f"{trainer.wall_s / 60:.1f} min; policy -> {run_dir / 'policy.onnx'}"
@@ -177,10 +186,136 @@ def train_cmd(
 
 
 # --- playback --------------------------------------------------------------------------------
-# (commands: dance, eval)
+
+
+@app.command("dance")
+def dance_cmd(
+    song: Annotated[
+        Path | None, typer.Argument(help="Audio file: wav, flac, ogg or mp3 (or use --demo).")
+    ] = None,
+    demo: Annotated[bool, typer.Option(help="Dance to the built-in demo song.")] = False,
+    motion: Annotated[
+        Path | None, typer.Option(help="Human motion (EDGE/AIST++ .pkl, .bvh) instead of ours.")
+    ] = None,
+    policy: Annotated[
+        Path | None, typer.Option(help="Policy .onnx (its .json beside it); default: shipped.")
+    ] = None,
+    mode: Annotated[str, typer.Option(help="Targets: feasible, paper or minmax.")] = "feasible",
+    seed: Annotated[int, typer.Option(help="Choreographer seed.")] = 0,
+    out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")] = Path("dance_out"),
+    no_video: Annotated[bool, typer.Option("--no-video", help="Skip the video.")] = False,
+    randomize: Annotated[
+        bool, typer.Option(help="Randomise the robot's dynamics as in training.")
+    ] = False,
+) -> None:
+    """Make the Go1 dance to a song: dance.mp4 (with the music), feet.png, metrics.json."""
+    from rich.console import Console
+    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+    from quaddance.play.dance import DanceJob, run_dance
+    from quaddance.play.metrics import summary_table
+    from quaddance.targets import MODES
+
+    if mode not in MODES:
+        raise typer.BadParameter(f"--mode must be one of {', '.join(MODES)}, got {mode!r}")
+    if demo:
+        if song is not None:
+            raise typer.BadParameter("give a SONG or --demo, not both")
+        from quaddance.music.synth import write_demo_song
+
+        out.mkdir(parents=True, exist_ok=True)
+        song = out / "demo_song.wav"
+        write_demo_song(song)
+    if song is None and motion is None:
+        raise typer.BadParameter("give a SONG, --demo, or --motion FILE")
+    console = Console(stderr=True)
+    job = DanceJob(
+        out_dir=out,
+        song=song,
+        motion=motion,
+        policy=policy,
+        mode=mode,
+        seed=seed,
+        video=not no_video,
+        randomize=randomize,
+    )
+    progress = Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TextColumn("{task.percentage:>3.0f}%"),
+        TimeRemainingColumn(),
+        console=console,
+        transient=True,
+    )
+    sim_task = None
+
+    def sim_progress(done: int, total: int) -> None:
+        nonlocal sim_task
+        if sim_task is None:
+            sim_task = progress.add_task("dancing (simulation)", total=total)
+        if done % 25 == 0 or done == total:
+            progress.update(sim_task, completed=done)
+
+    with progress:
+        result = run_dance(
+            job,
+            status=lambda msg: console.log(msg),
+            sim_progress=sim_progress,
+            show_render_progress=True,
+        )
+    Console().print(summary_table(result.metrics))
+    for name, path in result.paths.items():
+        console.print(f"{name}: {path}")
+    console.print(f"took {result.timings_s['total_s']:.1f} s")
+
+
+@app.command("eval")
+def eval_cmd(
+    items: Annotated[
+        list[Path] | None,
+        typer.Argument(help="Songs, motion files or folders of them (default: --held-out)."),
+    ] = None,
+    report: Annotated[Path, typer.Option("--report", "-o", help="Markdown report.")] = Path(
+        "report.md"
+    ),
+    policy: Annotated[
+        Path | None, typer.Option(help="Policy .onnx (its .json beside it); default: shipped.")
+    ] = None,
+    held_out: Annotated[
+        Path | None,
+        typer.Option(help="Write the held-out set (8 songs, 2 motions) here and evaluate it."),
+    ] = None,
+    seed: Annotated[int, typer.Option(help="Choreographer seed.")] = 0,
+) -> None:
+    """Run a policy over many songs/motions (no video): metrics per item, mean, plot."""
+    from rich.console import Console
+    from rich.progress import Progress
+
+    from quaddance.play.evaluate import collect_items, evaluate, summarize, write_held_out_set
+
+    paths = list(items or [])
+    if held_out is not None:
+        paths += write_held_out_set(held_out)
+    if not paths:
+        raise typer.BadParameter("give songs/motions/folders, or --held-out DIR")
+    todo = collect_items(paths)
+    with Progress(console=Console(stderr=True), transient=True) as bar:
+        task = bar.add_task("evaluating", total=len(todo))
+
+        def step(i: int, n: int, name: str) -> None:
+            bar.update(task, completed=i, description=f"evaluating {name}")
+
+        rows = evaluate(todo, policy, report, seed=seed, progress=step)
+    s = summarize(rows)
+    print(
+        f"{s['items']} items, {s['falls']} falls; feasible MAE "
+        f"{100 * (s['mae_feasible_m'] or 0):.1f} cm, corr {s['corr_feasible'] or 0:.2f}; rear lift "
+        f"{100 * (s['rear_lift_mean_m'] or 0):.1f} cm mean -> {report}"
+    )
+
 
 # --- benchmarks ------------------------------------------------------------------------------
-# (bench subcommands: beats, choreograph, train, dance)
+# (bench subcommands: beats, choreograph, train, dance, reach)
 
 
 @bench_app.command("choreograph")
@@ -204,6 +339,122 @@ def bench_choreograph_cmd(
         f"bank: {results['bank_s_per_sequence']:.4f} s per {results['bank_sequence_s']:.0f} s "
         f"sequence -> {out}"
     )
+
+
+@bench_app.command("train")
+def bench_train_cmd(
+    out: Annotated[Path, typer.Option("--out", "-o", help="JSON results.")] = Path(
+        "benchmarks/results/train_cpu.json"
+    ),
+    engine: Annotated[str, typer.Option(help="cpu or gpu.")] = "cpu",
+    num_envs: Annotated[
+        list[int] | None,
+        typer.Option(help="Env counts (default: cpu 64 256 1024, gpu 4096 16384)."),
+    ] = None,
+    preset: Annotated[
+        str | None, typer.Option(help="Training preset (default: cpu / paper).")
+    ] = None,
+    iterations: Annotated[int, typer.Option(help="Timed PPO iterations per env count.")] = 3,
+    mjlab: Annotated[bool, typer.Option(help="Also time mjlab's Go1 velocity task.")] = True,
+) -> None:
+    """Env-only and end-to-end PPO env steps/s; writes a JSON file."""
+    from quaddance.bench.train import run_train_bench
+
+    counts = tuple(num_envs or ((64, 256, 1024) if engine == "cpu" else (4096, 16384)))
+    run_train_bench(
+        out,
+        engine,
+        counts,
+        preset or ("cpu" if engine == "cpu" else "paper"),
+        iterations=iterations,
+        mjlab=mjlab,
+    )
+    print(f"-> {out}")
+
+
+@bench_app.command("dance")
+def bench_dance_cmd(
+    out: Annotated[Path, typer.Option("--out", "-o", help="JSON results.")] = Path(
+        "benchmarks/results/dance.json"
+    ),
+    policy: Annotated[Path | None, typer.Option(help="Policy .onnx; default: shipped.")] = None,
+) -> None:
+    """Time `dance` on the demo song with and without video; writes a JSON file."""
+    import tempfile
+
+    from rich.console import Console
+
+    from quaddance.fileio import write_json
+    from quaddance.music.synth import write_demo_song
+    from quaddance.play.dance import DanceJob, run_dance
+
+    results = {}
+    with tempfile.TemporaryDirectory() as tmp, Console(stderr=True).status("timing dance..."):
+        song = Path(tmp) / "demo.wav"
+        write_demo_song(song)
+        for video in (False, True):
+            job = DanceJob(out_dir=Path(tmp) / str(video), song=song, policy=policy, video=video)
+            r = run_dance(job, show_render_progress=False)
+            key = "with_video" if video else "no_video"
+            results[key] = {
+                "song_s": r.metrics["duration_s"],
+                **r.metrics["timings_s"],
+                "realtime_factor_sim": r.metrics["realtime_factor_sim"],
+                "realtime_factor_render": r.metrics["realtime_factor_render"],
+                "total_over_song": r.timings_s["total_s"] / r.metrics["duration_s"],
+            }
+    write_json(out, results)
+    print(results)
+    print(f"-> {out}")
+
+
+@bench_app.command("reach")
+def bench_reach_cmd(
+    out: Annotated[Path, typer.Option("--out", "-o", help="JSON results.")] = Path(
+        "benchmarks/results/reach.json"
+    ),
+    feet: Annotated[
+        list[str] | None, typer.Option("--foot", help="Front foot to lift, FL or FR (repeat).")
+    ] = None,
+    heights: Annotated[
+        list[float] | None,
+        typer.Option("--height", help="Coarse sweep heights, m (repeat; default 0.05 ... 0.45)."),
+    ] = None,
+    tolerance: Annotated[
+        float, typer.Option(help="Bisect the edge of the sweep down to this, m.")
+    ] = 0.005,
+) -> None:
+    """Highest front-foot height the Go1 holds standing on three legs, in our simulator."""
+    from rich.console import Console
+
+    from quaddance.fileio import write_json
+    from quaddance.sim.reach import DEFAULT_HEIGHTS_M, LIFTABLE_FEET, reach_report
+
+    chosen = tuple(feet or LIFTABLE_FEET)
+    for foot in chosen:
+        if foot not in LIFTABLE_FEET:
+            raise typer.BadParameter(f"--foot must be FL or FR, got {foot!r}")
+    console = Console(stderr=True)
+    with console.status("Settling the robot on three legs...") as status:
+
+        def show(foot: str, trial: dict) -> None:
+            status.update(
+                f"{foot}: {trial['target_m']:.3f} m -> held {trial['reached_m']:.3f} m "
+                f"({trial['reason']})"
+            )
+
+        results = reach_report(
+            chosen, tuple(heights or DEFAULT_HEIGHTS_M), tolerance, progress=show
+        )
+    write_json(out, results)
+    for foot, r in results["feet"].items():
+        print(
+            f"{foot}: reach {r['reach_m']:.3f} m (held {r['held_m']:.3f} m; fails at "
+            f"{r['first_failure_m'] or float('nan'):.3f} m); kinematic bound "
+            f"{r['kinematic_bound_front_m']:.3f} m in front of the hip, "
+            f"{r['kinematic_bound_m']:.3f} m anywhere; {r['n_trials']} trials, {r['wall_s']:.1f} s"
+        )
+    print(f"-> {out}")
 
 
 def main() -> None:

@@ -61,6 +61,7 @@ class TrainCfg:
     bank_duration_s: float = 32.0
     max_height_m: float | None = None  # feasible target bound; None: targets' default
     checkpoint_every_s: float = 120.0
+    max_minutes: float | None = None  # wall-clock budget of this call; stops cleanly
     torch_threads: int | None = None
     learning_rate: float = 1e-3  # FACTS.md section 1
     entropy_coef: float = 0.01
@@ -113,22 +114,26 @@ def rsl_rl_cfg(preset: Preset, cfg: TrainCfg) -> dict:
 def build_bank(cfg: TrainCfg, progress=None) -> np.ndarray:
     """The target bank: built-in choreographies of synthetic songs, cached in the run dir."""
     from quaddance.pipeline import target_bank
-    from quaddance.targets import TargetConfig
 
     path = cfg.run_dir / "bank.npy"
     if path.exists():
         bank = np.load(path, allow_pickle=False)
         if bank.ndim == 3 and bank.shape[2] == 4:
             return bank
-    tcfg = (
-        TargetConfig() if cfg.max_height_m is None else TargetConfig(max_height_m=cfg.max_height_m)
-    )
     bank = target_bank(
-        cfg.bank_size, cfg.bank_duration_s, seed=cfg.seed, cfg=tcfg, progress=progress
+        cfg.bank_size, cfg.bank_duration_s, seed=cfg.seed, cfg=_target_cfg(cfg), progress=progress
     )
     with atomic_path(path) as tmp:
         np.save(tmp, bank)
     return bank
+
+
+def _target_cfg(cfg: TrainCfg):
+    from quaddance.targets import TargetConfig
+
+    return (
+        TargetConfig() if cfg.max_height_m is None else TargetConfig(max_height_m=cfg.max_height_m)
+    )
 
 
 def _config_dict(cfg: TrainCfg) -> dict:
@@ -195,13 +200,15 @@ class Trainer:
             # weights_only: tensors and plain containers only, never arbitrary objects.
             state = torch.load(path, map_location=self.device, weights_only=True)
             self.alg.load(state, None, strict=True)
-        except (RuntimeError, KeyError, EOFError) as err:
-            raise InputFileError(path, f"not a usable checkpoint for this task ({err})") from err
-        self.iteration = int(state["iteration"])
-        self.env_steps = int(state["env_steps"])
-        self.wall_s = float(state["wall_s"])
-        torch.set_rng_state(state["torch_rng"])
-        self.env._gen.set_state(state["env_rng"])
+            self.iteration = int(state["iteration"])
+            self.env_steps = int(state["env_steps"])
+            self.wall_s = float(state["wall_s"])
+            torch.set_rng_state(state["torch_rng"])
+            self.env._gen.set_state(state["env_rng"])
+        except Exception as err:  # torch.load raises many types for a foreign/corrupt file
+            raise InputFileError(
+                path, f"not a usable checkpoint for this task ({type(err).__name__}: {err})"
+            ) from err
         self.log(f"resumed {path} at iteration {self.iteration} ({self.env_steps:,} env steps)")
 
     # --- learning ------------------------------------------------------------------------------
@@ -216,6 +223,9 @@ class Trainer:
         self.alg.train_mode()
         steps = self.preset.num_steps_per_env
         last_ckpt = time.monotonic()
+        deadline = (
+            None if self.cfg.max_minutes is None else time.monotonic() + 60 * self.cfg.max_minutes
+        )
         bar = _progress_bar(progress)
         task_id = bar.add_task("training", total=iterations) if bar else None
         if bar:
@@ -261,6 +271,9 @@ class Trainer:
                     self.save()
                     self.export()  # a usable policy at every checkpoint, not only at the end
                     last_ckpt = time.monotonic()
+                if deadline is not None and time.monotonic() > deadline:
+                    self.log(f"time budget of {self.cfg.max_minutes} min reached")
+                    break
         finally:
             if bar:
                 bar.stop()
@@ -342,7 +355,10 @@ def policy_metadata(env, cfg: TrainCfg, trainer: Trainer | None = None) -> dict:
             "history_len": task.obs.history_len,
             "normalization": "inside the ONNX model (running mean/std)",
         },
-        "task": _config_dict(cfg)["task"],
+        "task": dataclasses.asdict(task),  # the task as trained (reward set, envs, ...)
+        # The range of front targets the policy trained on (read off its bank): playback
+        # makes targets in the same range.
+        "targets": {"max_height_m": round(float(env.bank[..., :2].max()), 4)},
         "training": {
             "engine": cfg.engine,
             "preset": cfg.preset,

@@ -43,7 +43,13 @@ class AnalysisConfig:
     low_band_hz: float = 160.0
     """Upper edge of the kick/bass band, Hz (kick fundamentals lie at 40-120 Hz)."""
     low_band_weight: float = 1.0
-    """Weight of the low-band flux added to the full-band flux (tuned on code-made songs)."""
+    """Weight of the low-band flux added to the full-band flux for tempo estimation."""
+    high_band_hz: float = 3000.0
+    """Lower edge of the treble band, Hz (snare noise, hats and cymbals)."""
+    high_band_weight: float = 1.0
+    """Weight of the treble flux in the beat-placement onset envelope."""
+    log_compression: float = 1e5
+    """Gain inside log1p(gain * mel / max) of the treble onset: about 50 dB of range."""
     local_norm_s: float = 3.0
     """Window of the local level that the onset envelope is divided by, seconds."""
     min_bpm: float = 50.0
@@ -58,16 +64,20 @@ class AnalysisConfig:
     """Autocorrelation window of the local tempo curve, seconds."""
     max_tempo_ratio: float = 1.3
     """Local tempo may stray this far (ratio) from the global tempo."""
+    tempo_jump_cost: float = 3.0
+    """Cost of a sudden tempo change, in units of one 0.25 s step of clear evidence."""
     tempo_deviation_cost: float = 2.0
     """Cost of local tempo deviating from the global tempo, per squared octave."""
     tightness: float = 300.0
     """Penalty on beat intervals that differ from the local period (librosa default 100)."""
     onset_delay_s: float = 0.0
     """Delay of the onset envelope's peaks behind the true onsets, removed from beat times."""
-    section_kernel_beats: int = 16
-    """Half-width of the checkerboard kernel for section novelty, beats (4 bars)."""
-    section_min_bars: int = 4
+    section_kernel_bars: int = 4
+    """Bars compared on each side of a candidate section boundary."""
+    section_min_bars: int = 2
     """Shortest section, bars."""
+    section_threshold: float = 1.0
+    """Novelty a boundary needs: one unit = 3 dB louder or 50 % more onsets (tuned on code-made songs)."""
 
 
 @dataclass
@@ -157,9 +167,10 @@ class Analysis:
 
 @dataclass
 class _Features:
-    onset: np.ndarray  # (n,) beat-onset envelope, locally normalised
-    low_onset: np.ndarray  # (n,) low-band flux
-    raw_onset: np.ndarray  # (n,) full-band flux before normalisation
+    tempo_onset: np.ndarray  # (n,) onset envelope for tempo: full band + kick/bass band
+    beat_onset: np.ndarray  # (n,) onset envelope for beat placement: full band + treble band
+    low_onset: np.ndarray  # (n,) kick/bass band flux, dB
+    raw_onset: np.ndarray  # (n,) full-band flux, dB
     rms: np.ndarray  # (n,) linear RMS
     chroma: np.ndarray  # (12, n)
     fps: float
@@ -171,37 +182,55 @@ def _moving_average(x: np.ndarray, width: int) -> np.ndarray:
     return scipy.ndimage.uniform_filter1d(x, size=max(1, width), mode="nearest")
 
 
+def _local_normalise(x: np.ndarray, fps: float, cfg: AnalysisConfig) -> np.ndarray:
+    """Remove the slowly varying floor, then divide by the local level, so that a quiet intro
+    yields beats as clear as a loud chorus. The floor on the divisor keeps silence silent."""
+    x = np.maximum(0.0, x - _moving_average(x, round(0.5 * fps)))
+    level = _moving_average(x, round(cfg.local_norm_s * fps))
+    return x / np.maximum(level, 0.1 * float(np.mean(level)) + 1e-9)
+
+
 def _features(y: np.ndarray, sr: int, cfg: AnalysisConfig) -> _Features:
     import librosa
 
     fps = sr / cfg.hop_length
     stft = np.abs(librosa.stft(y, n_fft=cfg.n_fft, hop_length=cfg.hop_length, center=True))
     power = stft**2
-    mel_fb = librosa.filters.mel(sr=sr, n_fft=cfg.n_fft, n_mels=cfg.n_mels, fmax=sr / 2)
-    mel_db = librosa.power_to_db(mel_fb @ power, ref=np.max, top_db=80.0)
-    flux = np.maximum(0.0, np.diff(mel_db, axis=1, prepend=mel_db[:, :1]))
+    mel = librosa.filters.mel(sr=sr, n_fft=cfg.n_fft, n_mels=cfg.n_mels, fmax=sr / 2) @ power
     mel_hz = librosa.mel_frequencies(n_mels=cfg.n_mels + 2, fmax=sr / 2)[1:-1]
-    low = mel_hz <= cfg.low_band_hz
-    raw = flux.mean(axis=0)
-    low_onset = flux[low].mean(axis=0) if low.any() else np.zeros_like(raw)
-    onset = raw + cfg.low_band_weight * low_onset
-    # Remove the slowly varying floor, then divide by the local level, so that a quiet intro
-    # yields beats as clear as a loud chorus. The floor on the divisor keeps silence silent.
-    win = round(cfg.local_norm_s * fps)
-    onset = np.maximum(0.0, onset - _moving_average(onset, round(0.5 * fps)))
-    level = _moving_average(onset, win)
-    onset = onset / np.maximum(level, 0.1 * float(np.mean(level)) + 1e-9)
+    low, high = mel_hz <= cfg.low_band_hz, mel_hz >= cfg.high_band_hz
+
+    def flux(spec: np.ndarray, floor: float) -> np.ndarray:
+        # Silence (``floor``) before the first frame: a song that starts on a hit has an onset.
+        return np.maximum(0.0, np.diff(spec, axis=1, prepend=np.full((len(spec), 1), floor)))
+
+    # dB flux (80 dB range) hears every note start; the gentler log1p compression keeps loud
+    # hits louder than soft ones, which is what separates drum hits from hats and stabs.
+    flux_db = flux(librosa.power_to_db(mel, ref=np.max, top_db=80.0), -80.0)
+    flux_log = flux(np.log1p(cfg.log_compression * mel / max(float(mel.max()), 1e-12)), 0.0)
+    raw = flux_db.mean(axis=0)
+    low_onset = flux_db[low].mean(axis=0) if low.any() else np.zeros_like(raw)
+    high_onset = flux_log[high].mean(axis=0) if high.any() else np.zeros_like(raw)
+
+    def unit_mean(x: np.ndarray) -> np.ndarray:
+        return x / max(float(x.mean()), 1e-9)
+
+    tempo_onset = _local_normalise(raw + cfg.low_band_weight * low_onset, fps, cfg)
+    beat_onset = _local_normalise(
+        unit_mean(raw) + cfg.high_band_weight * unit_mean(high_onset), fps, cfg
+    )
     rms = librosa.feature.rms(S=stft, frame_length=cfg.n_fft)[0]
     chroma = librosa.feature.chroma_stft(S=power, sr=sr, n_fft=cfg.n_fft)
-    return _Features(onset, low_onset, raw, rms, chroma, fps)
+    return _Features(tempo_onset, beat_onset, low_onset, raw, rms, chroma, fps)
 
 
 # --- tempo ------------------------------------------------------------------------------------
 
 
-def _autocorrelation(x: np.ndarray, max_lag: int) -> np.ndarray:
-    """(max_lag + 1,) unbiased autocorrelation of a mean-removed signal, lag 0 normalised to 1."""
-    x = x - x.mean()
+def _autocorrelation(x: np.ndarray, max_lag: int, demean: bool = True) -> np.ndarray:
+    """(max_lag + 1,) unbiased autocorrelation (divided by the overlap length), lag 0 = 1."""
+    if demean:
+        x = x - x.mean()
     n = len(x)
     spec = np.fft.rfft(x, 2 * n)
     ac = np.fft.irfft(np.abs(spec) ** 2)[: max_lag + 1]
@@ -263,19 +292,24 @@ def _local_period(
     log_ratio = np.arange(-np.log(cfg.max_tempo_ratio), np.log(cfg.max_tempo_ratio), 0.01)
     periods = period * np.exp(log_ratio)
     hop = max(1, round(fps / 4))
-    centers = np.arange(win // 2, n - win // 2 + 1, hop)
+    centers = np.arange(win // 2, n - win + win // 2 + 1, hop)
     max_lag = min(win - 1, int(np.ceil(periods.max() * cfg.tempo_harmonics)) + 2)
     window = np.hanning(win)
+    # The window's own autocorrelation falls with lag and would pull the peaks to shorter lags
+    # (faster tempi, by about 1 %); dividing by it removes that bias.
+    window_ac = _autocorrelation(window, max_lag, demean=False)
     emis = np.zeros((len(centers), len(periods)))
     for k, c in enumerate(centers):
         seg = onset[c - win // 2 : c - win // 2 + win]
-        ac = _autocorrelation((seg - seg.mean()) * window, max_lag)
+        ac = _autocorrelation((seg - seg.mean()) * window, max_lag) / np.maximum(window_ac, 0.05)
         emis[k] = _harmonic_salience(ac, periods, cfg.tempo_harmonics)
     emis = emis / (np.abs(emis).max(axis=1, keepdims=True) + 1e-9)
     # Staying near the global tempo is preferred: a change has to be clear to be followed.
     emis -= cfg.tempo_deviation_cost * (log_ratio / np.log(2.0)) ** 2
     step = np.arange(len(periods))
-    trans = -0.5 * ((step[:, None] - step[None, :]) / 2.0) ** 2  # about 2 % per 0.25 s
+    # Tempo drifts by about 2 % per 0.25 s, or jumps (at a fixed cost) where a new part starts.
+    drift = -0.5 * ((step[:, None] - step[None, :]) / 2.0) ** 2
+    trans = np.maximum(drift, -cfg.tempo_jump_cost)
     score = emis[0].copy()
     back = np.zeros((len(centers), len(periods)), dtype=int)
     for k in range(1, len(centers)):
@@ -329,6 +363,29 @@ def _track_beats(onset: np.ndarray, period: np.ndarray, tightness: float) -> np.
     return np.array(beats[::-1])
 
 
+def _swing_shift(beat_frames: np.ndarray, onset: np.ndarray) -> float:
+    """Fraction of a beat to move the beats by when they sit on swung off-beats, else 0.
+
+    Swing delays the off-beat (to 0.55-0.7 of the beat); it never anticipates it. So when the
+    strongest onset inside the tracked beats comes early (before 0.47 of the beat) and its
+    mirror position is empty, the tracker has locked onto the swung off-beats and the true
+    beats lie that fraction later.
+    """
+    if len(beat_frames) < 8:
+        return 0.0
+    fractions = np.linspace(0.0, 1.0, 41)[1:-1]
+    starts, ends = beat_frames[:-1], beat_frames[1:]
+    pos = starts[:, None] + fractions[None, :] * (ends - starts)[:, None]
+    profile = np.interp(pos, np.arange(len(onset)), onset).mean(axis=0)
+    middle = (fractions > 0.25) & (fractions < 0.75)
+    i = int(np.argmax(np.where(middle, profile, -np.inf)))
+    f = fractions[i]
+    mirror = float(np.interp(1.0 - f, fractions, profile))
+    if f < 0.47 and profile[i] > 2.0 * mirror:
+        return float(f)
+    return 0.0
+
+
 def _refine(beats: np.ndarray, onset: np.ndarray, radius: int = 1) -> np.ndarray:
     """Sub-frame beat positions: parabolic peak of the onset envelope near each beat frame."""
     out = beats.astype(float)
@@ -351,7 +408,14 @@ def _downbeat_phase(beat_frames: np.ndarray, feats: _Features) -> int:
     low = feats.low_onset[idx]
     low = low / (low.mean() + 1e-9)
     # Chords change on downbeats: distance between the mean chroma of the beats either side.
-    chroma = feats.chroma[:, idx]
+    bounds = np.append(idx, len(feats.rms))
+    chroma = np.stack(
+        [
+            feats.chroma[:, a : max(b, a + 1)].mean(axis=1)
+            for a, b in zip(bounds[:-1], bounds[1:], strict=True)
+        ],
+        axis=1,
+    )
     chroma = chroma / (np.linalg.norm(chroma, axis=0, keepdims=True) + 1e-9)
     change = np.zeros(len(idx))
     change[1:] = 1.0 - np.sum(chroma[:, 1:] * chroma[:, :-1], axis=0)
@@ -364,59 +428,53 @@ def _downbeat_phase(beat_frames: np.ndarray, feats: _Features) -> int:
 # --- sections ---------------------------------------------------------------------------------
 
 
-def _sections(
-    beat_frames: np.ndarray, downbeat_frames: np.ndarray, feats: _Features, cfg: AnalysisConfig
-) -> np.ndarray:
-    """Section start frames: peaks of checkerboard novelty on beat-synchronous features."""
-    import scipy.signal
+def _sections(downbeat_frames: np.ndarray, feats: _Features, cfg: AnalysisConfig) -> np.ndarray:
+    """Section start frames (the first is 0): downbeats where the music changes character.
 
-    n_beats = len(beat_frames)
-    k = cfg.section_kernel_beats
-    if n_beats < 2 * k:
+    Each bar gets a feature vector in fixed units (loudness, onset density, bass density,
+    harmony); a boundary before bar i scores the mean distance between the bars just before
+    and just after it minus the mean distance within each side (Foote's checkerboard novelty
+    on bar-synchronous features). Local peaks above ``cfg.section_threshold`` win, strongest
+    first, at least ``cfg.section_min_bars`` apart.
+    """
+    n_bars = len(downbeat_frames) - 1
+    k = cfg.section_kernel_bars
+    if n_bars < 2 * cfg.section_min_bars:
         return np.array([0])
-    bounds = np.concatenate([beat_frames, [len(feats.rms)]])
-    rms_db = 20 * np.log10(feats.rms + 1e-6)
-    feat = []
-    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
-        b = max(b, a + 1)
+    rms_db = 20.0 * np.log10(feats.rms + 1e-5)
+    rows = []
+    for a, b in zip(downbeat_frames[:-1], downbeat_frames[1:], strict=True):
         chroma = feats.chroma[:, a:b].mean(axis=1)
-        feat.append(
+        rows.append(
             np.concatenate(
                 [
+                    # 3 dB louder, or 50 % more onsets, counts as one unit of change.
+                    [rms_db[a:b].mean() / 3.0],
+                    [np.log(feats.raw_onset[a:b].mean() + 1e-3) / np.log(1.5)],
+                    [np.log(feats.low_onset[a:b].mean() + 1e-3) / np.log(1.5)],
                     chroma / (np.linalg.norm(chroma) + 1e-9),
-                    [rms_db[a:b].mean() / 10.0, np.log1p(feats.raw_onset[a:b].mean())],
                 ]
             )
         )
-    f = np.array(feat)
-    f = (f - f.mean(axis=0)) / (f.std(axis=0) + 1e-9)
-    ssm = -np.linalg.norm(f[:, None, :] - f[None, :, :], axis=-1)
-    # Checkerboard kernel, tapered by a Gaussian (Foote 2000).
-    g = np.arange(-k, k) + 0.5
-    taper = np.exp(-0.5 * (g / (0.5 * k)) ** 2)
-    kernel = np.outer(np.sign(g), np.sign(g)) * np.outer(taper, taper)
-    padded = np.pad(ssm, k, mode="edge")
-    novelty = np.array(
-        [np.sum(kernel * padded[i : i + 2 * k, i : i + 2 * k]) for i in range(n_beats)]
-    )
-    novelty = -novelty  # a boundary is where within-block similarity beats cross-block
-    novelty = np.maximum(novelty, 0.0)
-    if novelty.max() <= 0:
-        return np.array([0])
-    novelty /= novelty.max()
-    peaks, _ = scipy.signal.find_peaks(
-        novelty, height=0.3, prominence=0.2, distance=cfg.section_min_bars * BEATS_PER_BAR
-    )
+    f = np.array(rows)
+    dist = np.linalg.norm(f[:, None, :] - f[None, :, :], axis=-1)
+    novelty = np.zeros(n_bars)
+    for i in range(2, n_bars - 1):
+        before = slice(max(0, i - k), i)
+        after = slice(i, min(n_bars, i + k))
+        within = 0.5 * (dist[before, before].mean() + dist[after, after].mean())
+        novelty[i] = dist[before, after].mean() - within
+    # Novelty rises over several bars around a change; only its local peaks are boundaries.
+    peak = np.zeros(n_bars, dtype=bool)
+    peak[1:-1] = (novelty[1:-1] >= novelty[:-2]) & (novelty[1:-1] >= novelty[2:])
+    chosen: list[int] = []
+    for i in np.argsort(-novelty, kind="stable"):
+        if novelty[i] < cfg.section_threshold:
+            break
+        if peak[i] and all(abs(int(i) - j) >= cfg.section_min_bars for j in chosen):
+            chosen.append(int(i))
     starts = [0]
-    for p in peaks:
-        # Snap each boundary to the nearest downbeat: sections start on bar lines.
-        frame = beat_frames[p]
-        if len(downbeat_frames):
-            frame = downbeat_frames[np.argmin(np.abs(downbeat_frames - frame))]
-        if frame - starts[-1] >= cfg.section_min_bars * BEATS_PER_BAR * np.median(
-            np.diff(beat_frames)
-        ):
-            starts.append(int(frame))
+    starts += [int(downbeat_frames[i]) for i in sorted(chosen)]
     return np.array(starts)
 
 
@@ -441,16 +499,21 @@ def analyze(y: np.ndarray, sr: int, cfg: AnalysisConfig | None = None) -> Analys
         raise ValueError(f"y must be mono (1-D), got shape {y.shape}")
     feats = _features(y, sr, cfg)
     fps = feats.fps
-    tempo_bpm = _global_tempo(feats.onset, fps, cfg)
+    tempo_bpm = _global_tempo(feats.tempo_onset, fps, cfg)
     global_bpm = tempo_bpm
-    period = _local_period(feats.onset, fps, tempo_bpm, cfg)
-    beat_frames = _track_beats(feats.onset, period, cfg.tightness)
+    period = _local_period(feats.tempo_onset, fps, tempo_bpm, cfg)
+    beat_frames = _track_beats(feats.beat_onset, period, cfg.tightness)
     beat_frames = _trim_silence(beat_frames, feats.rms)
-    beat_pos = _refine(beat_frames, feats.onset)
+    shift = _swing_shift(beat_frames, feats.beat_onset)
+    if shift > 0.0:
+        intervals = np.diff(beat_frames, append=2 * beat_frames[-1] - beat_frames[-2])
+        beat_frames = np.round(beat_frames + shift * intervals).astype(int)
+        beat_frames = beat_frames[beat_frames < len(feats.beat_onset)]
+    beat_pos = _refine(beat_frames, feats.beat_onset)
     beats_s = np.maximum(0.0, beat_pos / fps - cfg.onset_delay_s)
     phase = _downbeat_phase(beat_frames, feats)
     downbeat_frames = beat_frames[phase::BEATS_PER_BAR]
-    section_frames = _sections(beat_frames, downbeat_frames, feats, cfg)
+    section_frames = _sections(downbeat_frames, feats, cfg)
     if len(beats_s) > 1:
         tempo_bpm = float(60.0 / np.median(np.diff(beats_s)))
     return Analysis(

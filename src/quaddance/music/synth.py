@@ -5,7 +5,8 @@ audio and the ground truth (beat, downbeat and section-change times) is exact by
 
 A song is a sequence of 4/4 bars. Its parts are:
 
-- an optional quiet intro (soft plucked chords on every beat, soft hats, no kick or bass);
+- an optional quiet intro (soft plucked chords on every beat, soft hats on eighths, no kick
+  or bass);
 - then ``sections`` equal parts that alternate between a calm arrangement (kick on 1 and 3,
   hats on the beat, bass on 1 and 3, sustained chords) and a loud, denser one (kick on every
   beat, hats on eighths, bass on eighths, chord stabs, a crash on the first downbeat).
@@ -207,7 +208,8 @@ def render_song(
         if bar < intro_bars:
             for beat in range(BEATS_PER_BAR):
                 voices.chord(time_at(b0 + beat), notes, 0.4, 0.12 * velocity, pluck=True)
-                voices.hat(time_at(b0 + beat + offbeat), 0.05)
+                voices.hat(time_at(b0 + beat), 0.06)
+                voices.hat(time_at(b0 + beat + offbeat), 0.04)
             continue
         part = min(sections - 1, (bar - intro_bars) // section_bars)
         if bar > 0 and (bar == intro_bars or (bar - intro_bars) == part * section_bars):

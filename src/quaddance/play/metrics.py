@@ -19,9 +19,14 @@ import numpy as np
 
 from quaddance.errors import QuaddanceError
 
-FEASIBLE_MAX_M = 0.20
-"""Highest front-foot target counted as reachable on three legs, m
-(the same number as `quaddance.targets.TargetConfig.max_height_m`; a test keeps them equal)."""
+
+def default_feasible_max_m() -> float:
+    """Highest front-foot target counted as reachable on three legs, m: the feasible target
+    mode's ceiling, `quaddance.targets.TargetConfig.max_height_m` (one definition)."""
+    from quaddance.targets import TargetConfig  # pulls in scipy; only when needed
+
+    return TargetConfig().max_height_m
+
 
 GROUND_TOL_M = 0.01
 """A target at most this high asks the foot to stand, m (the foot sphere's contact slop)."""
@@ -131,20 +136,23 @@ def beat_align_score(
 
 def feasible_mask(
     targets_m: np.ndarray,
-    feasible_max_m: float = FEASIBLE_MAX_M,
+    feasible_max_m: float | None = None,
     ground_tol_m: float = GROUND_TOL_M,
 ) -> np.ndarray:
     """Frames where each front foot's target is reachable on three legs (see the module doc).
 
     Args:
         targets_m: (T, 4) foot-height targets (FL, FR, RL, RR), m.
-        feasible_max_m: highest reachable front-foot target, m.
+        feasible_max_m: highest reachable front-foot target, m; None: see
+            `default_feasible_max_m`.
         ground_tol_m: a target at most this high asks the foot to stand, m.
 
     Returns:
         (T, 2) bool, columns (FL, FR).
     """
     targets = _check_feet("targets_m", targets_m)
+    if feasible_max_m is None:
+        feasible_max_m = default_feasible_max_m()
     front = targets[:, :2]
     in_range = (front >= -ground_tol_m) & (front <= feasible_max_m)
     other_down = np.abs(front[:, ::-1]) <= ground_tol_m
@@ -217,7 +225,7 @@ def dance_metrics(
     falls_s: Sequence[float],
     sim_time_s: float,
     render_time_s: float | None,
-    feasible_max_m: float = FEASIBLE_MAX_M,
+    feasible_max_m: float | None = None,
     ground_tol_m: float = GROUND_TOL_M,
 ) -> dict[str, Any]:
     """All metrics of one danced song, JSON-ready (None for undefined values).
@@ -230,7 +238,8 @@ def dance_metrics(
         falls_s: times at which the robot fell, s.
         sim_time_s: wall-clock seconds the simulation took.
         render_time_s: wall-clock seconds the video took, or None without video.
-        feasible_max_m, ground_tol_m: define the feasible part (module doc).
+        feasible_max_m, ground_tol_m: define the feasible part (module doc); pass the
+            ceiling the policy's targets were made with (None: `default_feasible_max_m`).
 
     Returns:
         Keys ``duration_s``, ``falls_s``, ``front`` (``fl``/``fr`` -> ``mae_m``,

@@ -84,12 +84,16 @@ def plot_feet(
         ax.plot(time, targets[:, i], "--", color=colour, lw=1.3, label="target")
         ax.plot(time, feet[:, i], "-", color=colour, lw=1.3, alpha=0.9, label="measured")
         ax.set_ylabel(f"{name} height (m)")
-        ax.set_ylim(-0.02, 1.08 * front_top_m)
+        ax.set_ylim(-0.02, 1.3 * front_top_m)  # headroom for the legend
         ax.legend(loc="upper right", fontsize=8, frameon=False, ncol=2)
     rear_ax = axes[2]
     for i, name in [(2, "RL"), (3, "RR")]:
         rear_ax.plot(time, feet[:, i], "-", color=FOOT_COLOURS[name], lw=1.2, label=name)
     rear_ax.axhline(0.0, color="0.3", ls="--", lw=1.0, label="target")
+    # At least 5 cm of scale, so that millimetre jitter does not look like a lift.
+    rear_lo = min(-0.01, float(np.nanmin(feet[:, 2:], initial=0.0)))
+    rear_hi = max(0.05, 1.3 * float(np.nanmax(feet[:, 2:], initial=0.0)))
+    rear_ax.set_ylim(rear_lo, rear_hi)
     rear_ax.set_ylabel("rear height (m)")
     rear_ax.set_xlabel("time (s)")
     rear_ax.legend(loc="upper right", fontsize=8, frameon=False, ncol=3)

@@ -28,7 +28,7 @@ class RewardCfg:
     c_r: float = -30.0  # eq. 3, rear feet (h_rl^2 + h_rr^2)
     # Ours: eq. 3 is tiny for cm-scale lifts (2 cm -> 0.012), so a linear term keeps the
     # rear feet down.
-    rear_lift_l1: float = -10.0
+    rear_lift_l1: float = -50.0
     # Walk These Ways auxiliaries (weights from WTW's Go1 config, scaled for this task).
     torques: float = -1e-4
     joint_vel: float = -1e-4

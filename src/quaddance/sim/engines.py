@@ -16,19 +16,30 @@ import mujoco
 import numpy as np
 import torch
 
-from quaddance.sim import go1
 from quaddance.sim.scene import SceneCfg, build_model
 from quaddance.sim.state import SensorLayout
 
 # Columns of a dynamics variant row.
 FRICTION, ADDED_MASS_KG, MOTOR_STRENGTH = 0, 1, 2
-NOMINAL_DYNAMICS = np.array([[1.0, 0.0, 1.0]])
+
+
+def nominal_dynamics(scene: SceneCfg) -> np.ndarray:
+    """(1, 3) the unrandomised robot: the scene's friction, no added mass, full strength."""
+    return np.array([[scene.foot_friction, 0.0, 1.0]])
+
+
+def robot_collision_geoms(model: mujoco.MjModel) -> list[int]:
+    """Ids of every robot geom that can touch the floor (feet, and calves when kneeling)."""
+    return [i for i in range(model.ngeom) if "_collision" in (model.geom(i).name or "")]
 
 
 def apply_dynamics(model: mujoco.MjModel, row: np.ndarray) -> None:
-    """Write one variant (friction, added base mass, motor strength) into a model in place."""
-    feet = [model.geom(f"{f}_foot_collision").id for f in go1.FEET]
-    model.geom_friction[feet, 0] = row[FRICTION]
+    """Write one variant (friction, added base mass, motor strength) into a model in place.
+
+    Friction goes to every robot collision geom: a calf touching the floor with another
+    friction than the foot beside it would make the engines disagree.
+    """
+    model.geom_friction[robot_collision_geoms(model), 0] = row[FRICTION]
     trunk = model.body("trunk").id
     model.body_mass[trunk] += row[ADDED_MASS_KG]
     # Position actuator: force = kp*(ctrl - q) - kd*qdot; strength scales both gains.
@@ -53,7 +64,7 @@ class CpuEngine:
         self,
         num_envs: int,
         scene: SceneCfg = SceneCfg(),
-        variants: np.ndarray = NOMINAL_DYNAMICS,
+        variants: np.ndarray | None = None,
         nthread: int | None = None,
     ) -> None:
         from mujoco import rollout
@@ -64,7 +75,8 @@ class CpuEngine:
         base = build_model(scene, visual=False)
         self.model = base
         self.layout = SensorLayout.from_model(base)
-        self.variants = np.asarray(variants, dtype=np.float64)
+        rows = nominal_dynamics(scene) if variants is None else variants
+        self.variants = np.asarray(rows, dtype=np.float64)
         self._variant_models = []
         for row in self.variants:
             m = copy.deepcopy(base)

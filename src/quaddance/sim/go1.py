@@ -43,4 +43,4 @@ KNEE_EFFORT_NM = 35.55
 HIP_ARMATURE = ROTOR_INERTIA * HIP_GEAR_RATIO**2
 KNEE_ARMATURE = ROTOR_INERTIA * KNEE_GEAR_RATIO**2
 
-INIT_BASE_HEIGHT_M = 0.30  # spawn height; the robot settles to about 0.28 m
+INIT_BASE_HEIGHT_M = 0.325  # spawn height with the feet on the floor; settles to 0.27 m

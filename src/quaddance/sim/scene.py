@@ -103,10 +103,10 @@ def build_spec(cfg: SceneCfg = SceneCfg(), visual: bool = True) -> mujoco.MjSpec
 
     for geom in spec.geoms:
         if geom.name.endswith("_collision") or "_collision" in geom.name:
+            # One friction for every robot geom; priority makes it override the floor's.
             geom.contype, geom.conaffinity, geom.condim = 1, 0, 3
-            if geom.name.endswith("_foot_collision"):
-                geom.friction = [cfg.foot_friction, 0.005, 0.0001]
-                geom.priority = 1
+            geom.friction = [cfg.foot_friction, 0.005, 0.0001]
+            geom.priority = 1
 
     for name in go1.JOINT_NAMES:
         joint = spec.joint(name)

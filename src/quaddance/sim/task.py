@@ -16,15 +16,16 @@ from tensordict import TensorDict
 
 from quaddance.sim import go1, observations, rewards, terminations
 from quaddance.sim.config import DanceTaskCfg
-from quaddance.sim.engines import NOMINAL_DYNAMICS, make_engine
+from quaddance.sim.engines import make_engine, nominal_dynamics
 from quaddance.sim.state import RobotState, state_from_arrays
 
 
 def sample_dynamics(cfg: DanceTaskCfg, rng: np.random.Generator) -> np.ndarray:
     """K dynamics variants (friction, added mass kg, motor strength) drawn uniformly."""
     dr = cfg.domain_rand
+    nominal = nominal_dynamics(cfg.scene)
     if not dr.enabled:
-        return NOMINAL_DYNAMICS.copy()
+        return nominal
     k = dr.num_variants
     rows = np.stack(
         [
@@ -34,7 +35,7 @@ def sample_dynamics(cfg: DanceTaskCfg, rng: np.random.Generator) -> np.ndarray:
         ],
         axis=1,
     )
-    rows[0] = NOMINAL_DYNAMICS[0]  # always keep the nominal robot among the variants
+    rows[0] = nominal[0]  # always keep the nominal robot among the variants
     return rows
 
 

@@ -9,8 +9,14 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from quaddance.sim import go1
-from quaddance.sim.engines import ADDED_MASS_KG, FRICTION, MOTOR_STRENGTH, EngineOutput
+from quaddance.sim.engines import (
+    ADDED_MASS_KG,
+    FRICTION,
+    MOTOR_STRENGTH,
+    EngineOutput,
+    nominal_dynamics,
+    robot_collision_geoms,
+)
 from quaddance.sim.scene import SceneCfg, build_model
 from quaddance.sim.state import SensorLayout
 
@@ -65,9 +71,9 @@ class WarpEngine:
             "gain": self._gain[0].clone(),
             "bias": self._bias[0].clone(),
         }
-        self._feet = torch.tensor([mjm.geom(f"{f}_foot_collision").id for f in go1.FEET])
+        self._contact_geoms = torch.as_tensor(robot_collision_geoms(mjm))
         self._trunk = mjm.body("trunk").id
-        rows = np.array([[1.0, 0.0, 1.0]]) if variants is None else np.asarray(variants)
+        rows = nominal_dynamics(scene) if variants is None else np.asarray(variants)
         self.variants = rows
         self._variants = torch.as_tensor(rows, dtype=torch.float32, device=self.device)
         self.variant_idx = torch.zeros(num_envs, dtype=torch.long, device=self.device)
@@ -106,7 +112,7 @@ class WarpEngine:
         self.variant_idx[ids] = torch.as_tensor(variant_idx, device=self.device)
         dflt = self._defaults
         fr = dflt["friction"].repeat(len(ids), 1, 1)
-        fr[:, self._feet, 0] = v[:, FRICTION : FRICTION + 1]
+        fr[:, self._contact_geoms, 0] = v[:, FRICTION : FRICTION + 1]
         self._friction[ids] = fr
         mass = dflt["mass"].repeat(len(ids), 1)
         mass[:, self._trunk] += v[:, ADDED_MASS_KG]
@@ -160,6 +166,9 @@ class WarpEngine:
         return self.read()
 
     def read(self) -> EngineOutput:
+        # Copies: the Warp buffers change in place at the next step.
         return EngineOutput(
-            qpos=self.qpos.float(), qvel=self.qvel.float(), sensordata=self.sensordata.float()
+            qpos=self.qpos.float().clone(),
+            qvel=self.qvel.float().clone(),
+            sensordata=self.sensordata.float().clone(),
         )

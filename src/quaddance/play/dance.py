@@ -1,0 +1,135 @@
+"""The main job: a song (or a motion file) in, the Go1 dancing to it out.
+
+song -> analysis -> choreography -> targets -> closed-loop rollout of the ONNX policy on the
+cpu engine -> dance.mp4 (with the song), feet.png (the paper's Fig. 4), metrics.json.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from quaddance.dancefile import Dance, save_dance
+from quaddance.errors import InputFileError
+from quaddance.fileio import write_json
+from quaddance.play.policy import OnnxPolicy, shipped_policy_path
+
+
+@dataclass
+class DanceJob:
+    """What `quaddance dance` was asked to do."""
+
+    out_dir: Path
+    song: Path | None = None
+    motion: Path | None = None
+    policy: Path | None = None  # None: the shipped policy
+    mode: str = "feasible"
+    seed: int = 0
+    video: bool = True
+    randomize: bool = False
+    width: int = 640
+    height: int = 480
+    target_markers: bool = True
+
+
+@dataclass
+class DanceOutputs:
+    dance: Dance
+    metrics: dict[str, Any]
+    paths: dict[str, Path] = field(default_factory=dict)
+    timings_s: dict[str, float] = field(default_factory=dict)
+
+
+def target_config_for(policy: OnnxPolicy, mode: str):
+    """Targets in the range the policy was trained on (its JSON), in the requested mode."""
+    from quaddance.targets import TargetConfig
+
+    max_h = policy.meta.get("targets", {}).get("max_height_m")
+    return TargetConfig(mode=mode) if max_h is None else TargetConfig(mode=mode, max_height_m=max_h)
+
+
+def run_dance(
+    job: DanceJob,
+    status: Callable[[str], None] = lambda msg: None,
+    sim_progress: Callable[[int, int], None] | None = None,
+    show_render_progress: bool = True,
+) -> DanceOutputs:
+    """Run the whole pipeline; every output is written atomically into `job.out_dir`."""
+    from quaddance.pipeline import make_dance
+    from quaddance.play.metrics import dance_metrics
+    from quaddance.play.plots import plot_feet
+    from quaddance.play.rollout import rollout
+
+    t_start = time.perf_counter()
+    for path in (job.song, job.motion):
+        if path is not None and not Path(path).is_file():
+            raise InputFileError(path, "no such file")
+    policy_path = job.policy or shipped_policy_path()
+    policy = OnnxPolicy.load(policy_path)
+    out = job.out_dir
+    out.mkdir(parents=True, exist_ok=True)
+    timings: dict[str, float] = {}
+
+    status("analysing the music and choreographing")
+    t0 = time.perf_counter()
+    dance, _ = make_dance(
+        job.song,
+        job.motion,
+        mode=job.mode,
+        seed=job.seed,
+        target_cfg=target_config_for(policy, job.mode),
+    )
+    timings["choreography_s"] = time.perf_counter() - t0
+    paths = {"dance": out / "dance.npz"}
+    save_dance(paths["dance"], dance)
+
+    status("dancing (simulation)")
+    result = rollout(dance, policy, randomize=job.randomize, seed=job.seed, progress=sim_progress)
+    timings["simulation_s"] = result.sim_wall_s
+
+    render_s = None
+    if job.video:
+        from quaddance.play.video import render_video
+
+        status("filming")
+        t0 = time.perf_counter()
+        paths["video"] = out / "dance.mp4"
+        render_video(
+            None,
+            result.qpos,
+            result.fps,
+            paths["video"],
+            audio_path=job.song,
+            width=job.width,
+            height=job.height,
+            target_heights_m=result.targets_m if job.target_markers else None,
+            progress=show_render_progress,
+        )
+        render_s = time.perf_counter() - t0
+        timings["render_s"] = render_s
+
+    title = f"{Path(dance.source).name} - {policy_path.name}"
+    paths["plot"] = plot_feet(
+        out / "feet.png", result.time_s, result.targets_m, result.feet_m, dance.beats_s, title
+    )
+    metrics = dance_metrics(
+        result.time_s,
+        result.targets_m,
+        result.feet_m,
+        dance.beats_s,
+        result.falls_s,
+        sim_time_s=result.sim_wall_s,
+        render_time_s=render_s,
+        feasible_max_m=target_config_for(policy, "feasible").max_height_m,
+    )
+    timings["total_s"] = time.perf_counter() - t_start
+    metrics["source"] = dance.source
+    metrics["policy"] = str(policy_path)
+    metrics["mode"] = dance.mode
+    metrics["timings_s"] = {k: round(v, 3) for k, v in timings.items()}
+    paths["metrics"] = out / "metrics.json"
+    write_json(paths["metrics"], metrics)
+    return DanceOutputs(dance=dance, metrics=metrics, paths=paths, timings_s=timings)

@@ -1,0 +1,172 @@
+"""End to end: `quaddance dance` and `quaddance eval` with the shipped policy."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import soundfile as sf
+
+from quaddance.errors import InputFileError, QuaddanceError
+from quaddance.music.synth import render_song
+from quaddance.play.dance import DanceJob, run_dance
+from quaddance.play.policy import OnnxPolicy, shipped_policy_path
+
+METRIC_KEYS = {
+    "duration_s",
+    "falls_s",
+    "front",
+    "rear_lift_mean_m",
+    "rear_lift_max_m",
+    "bas",
+    "realtime_factor_sim",
+    "realtime_factor_render",
+}
+FOOT_KEYS = {"mae_m", "mae_feasible_m", "corr", "corr_feasible"}
+
+
+@pytest.fixture(scope="module")
+def short_song(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("song") / "short.wav"
+    y, _ = render_song(120.0, 4.0, seed=3)
+    sf.write(path, y, 22050)
+    return path
+
+
+def test_shipped_policy_loads_and_matches_the_task():
+    policy = OnnxPolicy.load(shipped_policy_path())
+    from quaddance.sim.observations import observation_layout
+
+    obs = policy.task.obs
+    layout = observation_layout(obs.history_len, len(obs.preview_s), obs.privileged_critic)
+    assert layout["actor_dim"] == policy.obs_dim
+    actions = policy.act(np.zeros((1, policy.obs_dim), np.float32))
+    assert actions.shape == (1, 12) and np.isfinite(actions).all()
+
+
+def test_dance_writes_video_plot_and_complete_metrics(short_song, tmp_path):
+    from quaddance.play.video import video_info
+
+    out = run_dance(DanceJob(out_dir=tmp_path, song=short_song, width=320, height=240))
+    metrics = json.loads((tmp_path / "metrics.json").read_text())
+    assert set(metrics) >= METRIC_KEYS
+    assert set(metrics["front"]) == {"fl", "fr"}
+    for foot in ("fl", "fr"):
+        assert set(metrics["front"][foot]) >= FOOT_KEYS
+        assert metrics["front"][foot]["mae_m"] is not None
+    assert metrics["duration_s"] == pytest.approx(4.0, abs=0.05)
+    assert metrics["realtime_factor_render"] is not None
+    info = video_info(tmp_path / "dance.mp4")
+    assert info["duration_s"] == pytest.approx(4.0, abs=0.2)
+    assert info["has_audio"]
+    assert (tmp_path / "feet.png").stat().st_size > 10_000
+    assert out.dance.targets_m.shape[1] == 4
+
+
+def test_dance_cli_without_video(short_song, tmp_path):
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "quaddance.cli",
+            "dance",
+            str(short_song),
+            "--no-video",
+            "--out",
+            str(tmp_path),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert not (tmp_path / "dance.mp4").exists()
+    metrics = json.loads((tmp_path / "metrics.json").read_text())
+    assert metrics["realtime_factor_render"] is None
+    assert metrics["realtime_factor_sim"] > 1.0
+
+
+@pytest.mark.parametrize(
+    ("content", "suffix", "needle"),
+    [(b"not audio at all", ".wav", "bad.wav"), (b"", ".mp3", "bad.mp3"), (b"x", ".xyz", "bad.xyz")],
+)
+def test_dance_cli_bad_song_is_one_clear_line(tmp_path, content, suffix, needle):
+    bad = tmp_path / f"bad{suffix}"
+    bad.write_bytes(content)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "quaddance.cli",
+            "dance",
+            str(bad),
+            "--no-video",
+            "--out",
+            str(tmp_path / "o"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 2
+    assert needle in proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_missing_song_is_reported(tmp_path):
+    with pytest.raises(InputFileError, match=r"nope\.wav"):
+        run_dance(DanceJob(out_dir=tmp_path, song=tmp_path / "nope.wav", video=False))
+
+
+def test_silent_and_too_short_audio_are_refused(tmp_path):
+    silent, short = tmp_path / "silent.wav", tmp_path / "short.wav"
+    sf.write(silent, np.zeros(22050 * 5, np.float32), 22050)
+    sf.write(short, 0.3 * np.random.default_rng(0).standard_normal(22050).astype(np.float32), 22050)
+    for path in (silent, short):
+        with pytest.raises(QuaddanceError, match=re.escape(path.name)):
+            run_dance(DanceJob(out_dir=tmp_path / "o", song=path, video=False))
+
+
+def test_policy_whose_json_disagrees_with_the_task_is_refused(tmp_path, short_song):
+    src = shipped_policy_path()
+    onnx = tmp_path / "p.onnx"
+    onnx.write_bytes(src.read_bytes())
+    meta = json.loads(src.with_suffix(".json").read_text())
+    meta["task"]["obs"]["history_len"] += 2  # the task would make more observations
+    onnx.with_suffix(".json").write_text(json.dumps(meta))
+    with pytest.raises(QuaddanceError, match="observations"):
+        run_dance(DanceJob(out_dir=tmp_path / "o", song=short_song, policy=onnx, video=False))
+
+
+def test_a_failing_render_keeps_the_previous_video(short_song, tmp_path, monkeypatch):
+    old = tmp_path / "dance.mp4"
+    old.write_bytes(b"previous good video")
+    import quaddance.play.video as video
+
+    def boom(*args, **kwargs):
+        raise QuaddanceError("renderer failed")
+
+    monkeypatch.setattr(video, "render_video", boom)
+    with pytest.raises(QuaddanceError):
+        run_dance(DanceJob(out_dir=tmp_path, song=short_song))
+    assert old.read_bytes() == b"previous good video"
+
+
+def test_eval_reports_each_item_and_the_mean(short_song, tmp_path):
+    from quaddance.play.evaluate import evaluate
+
+    second = tmp_path / "second.wav"
+    y, _ = render_song(96.0, 4.0, seed=5)
+    sf.write(second, y, 22050)
+    report = tmp_path / "report.md"
+    rows = evaluate([short_song, second], None, report)
+    text = report.read_text()
+    assert len(rows) == 2
+    assert "short.wav" in text and "second.wav" in text and "**mean**" in text
+    assert report.with_suffix(".png").exists()

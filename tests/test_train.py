@@ -1,0 +1,251 @@
+"""PPO training: learning, checkpoints and resume, ONNX export, the target bank, the CLI."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import shutil
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import onnxruntime as ort
+import pytest
+import torch
+from tensordict import TensorDict
+from typer.testing import CliRunner
+
+from quaddance.cli import app, main
+from quaddance.errors import InputFileError
+from quaddance.sim import go1
+from quaddance.train import TrainCfg, Trainer, build_bank
+
+NUM_ENVS = 8
+STEPS_PER_ENV = 24  # the cpu preset's
+
+
+def small_bank() -> np.ndarray:
+    """(2, 1100, 4) targets at 50 Hz: a few front-foot lifts, rear feet down."""
+    bank = np.zeros((2, 1100, 4), np.float32)
+    for start in range(50, 1100, 150):
+        bank[0, start : start + 25, 0] = 0.08
+        bank[1, start + 40 : start + 60, 1] = 0.05
+    return bank
+
+
+def make_cfg(run_dir, **kwargs) -> TrainCfg:
+    return TrainCfg(run_dir=run_dir, num_envs=NUM_ENVS, preset="cpu", bank_size=2, **kwargs)
+
+
+def actor_state(trainer: Trainer) -> dict[str, torch.Tensor]:
+    return {k: v.detach().clone() for k, v in trainer.alg.get_policy().state_dict().items()}
+
+
+@dataclass
+class TrainedRun:
+    trainer: Trainer
+    initial_actor: dict[str, torch.Tensor]  # before learning
+    rows: list[dict]
+    onnx_path: Path
+    json_path: Path
+
+    @property
+    def run_dir(self) -> Path:
+        return self.trainer.cfg.run_dir
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory) -> TrainedRun:
+    """A trainer after 2 PPO iterations with Table 1's third reward set, exported."""
+    run_dir = tmp_path_factory.mktemp("run")
+    cfg = make_cfg(run_dir, iterations=2, reward="table1-3")
+    trainer = Trainer(cfg, bank=small_bank(), log=lambda *a: None)
+    initial = actor_state(trainer)
+    rows = trainer.learn(2, progress=False)
+    onnx_path, json_path = trainer.export()
+    return TrainedRun(trainer, initial, rows, onnx_path, json_path)
+
+
+# --- learning -------------------------------------------------------------------------------
+
+
+def test_two_iterations_learn_and_log_a_curve(trained):
+    t = trained.trainer
+    assert (t.iteration, t.env_steps) == (2, 2 * STEPS_PER_ENV * NUM_ENVS)
+    assert [r["iteration"] for r in trained.rows] == [1, 2]
+    for row in trained.rows:
+        assert math.isfinite(row["value_loss"]) and math.isfinite(row["surrogate_loss"])
+        assert math.isfinite(row["reward_per_step"]) and row["action_std"] > 0
+        assert 0 <= row["front_abs_err_m"] < 0.5
+    # The update changed the actor.
+    after = actor_state(t)
+    assert any(not torch.equal(after[k], v) for k, v in trained.initial_actor.items())
+    with (trained.run_dir / "curve.csv").open() as f:
+        curve = list(csv.DictReader(f))
+    assert [int(r["iteration"]) for r in curve] == [1, 2]
+    assert float(curve[-1]["env_steps"]) == t.env_steps
+    assert (trained.run_dir / "checkpoint.pt").is_file()
+
+
+def test_resume_restores_counters_weights_and_appends_to_the_curve(trained, tmp_path):
+    run_dir = tmp_path / "run"
+    shutil.copytree(trained.run_dir, run_dir)
+    cfg = make_cfg(run_dir, resume=True, reward="table1-3")
+    resumed = Trainer(cfg, bank=small_bank(), log=lambda *a: None)
+    assert (resumed.iteration, resumed.env_steps) == (2, trained.trainer.env_steps)
+    assert resumed.wall_s == pytest.approx(trained.trainer.wall_s)
+    expected = actor_state(trained.trainer)
+    got = actor_state(resumed)
+    assert got.keys() == expected.keys()
+    for k in expected:
+        torch.testing.assert_close(got[k], expected[k], rtol=0, atol=0)
+    resumed.learn(1, progress=False)
+    assert resumed.iteration == 3
+    with (run_dir / "curve.csv").open() as f:
+        assert [int(r["iteration"]) for r in csv.DictReader(f)] == [1, 2, 3]
+
+
+# --- export ---------------------------------------------------------------------------------
+
+
+def test_onnx_export_equals_the_deterministic_torch_policy(trained):
+    policy = trained.trainer.alg.get_policy()
+    # The running normaliser moved during learning, so this also checks it is exported.
+    assert policy.obs_normalizer.mean.abs().max() > 0
+    session = ort.InferenceSession(str(trained.onnx_path), providers=["CPUExecutionProvider"])
+    dim = session.get_inputs()[0].shape[-1]
+    obs = torch.randn(16, dim, generator=torch.Generator().manual_seed(0)) * 2.0
+    policy.eval()
+    try:
+        with torch.no_grad():
+            expected = policy(TensorDict({"actor": obs}, batch_size=[16]), stochastic_output=False)
+    finally:
+        policy.train()
+    (got,) = session.run(None, {session.get_inputs()[0].name: obs.numpy()})
+    assert got.shape == (16, go1.NUM_JOINTS)
+    np.testing.assert_allclose(got, expected.numpy(), atol=1e-5, rtol=1e-5)
+
+
+def test_policy_json_describes_the_policy(trained):
+    meta = json.loads(trained.json_path.read_text())
+    env = trained.trainer.env
+    dim = env.obs_layout["actor_dim"]
+    assert meta["obs"]["dim"] == dim == env.get_observations()["actor"].shape[1]
+    assert sum(item["size"] for item in meta["obs"]["layout"]) == dim
+    session = ort.InferenceSession(str(trained.onnx_path), providers=["CPUExecutionProvider"])
+    assert session.get_inputs()[0].shape[-1] == dim
+    assert meta["joint_names"] == list(go1.JOINT_NAMES)
+    assert meta["feet"] == ["FL", "FR", "RL", "RR"]
+    np.testing.assert_allclose(meta["action_scale"], [0.125, 0.25, 0.25] * 4)
+    assert meta["nominal_joint_pos_rad"] == pytest.approx(go1.nominal_joint_pos())
+    assert (meta["policy_hz"], meta["decimation"], meta["sim_dt_s"]) == (50.0, 4, 0.005)
+    assert meta["training"]["iterations"] == 2
+    assert meta["training"]["num_envs"] == NUM_ENVS
+    assert meta["training"]["reward"] == "table1-3"
+
+
+def test_policy_json_task_is_the_task_that_was_trained(trained):
+    task = json.loads(trained.json_path.read_text())["task"]
+    assert (task["rewards"]["c_f"], task["rewards"]["lambda_f"]) == (60.0, 100.0)
+    assert task["num_envs"] == NUM_ENVS
+
+
+# --- resume errors --------------------------------------------------------------------------
+
+
+def test_resume_without_a_checkpoint_names_the_file(tmp_path):
+    with pytest.raises(InputFileError) as err:
+        Trainer(make_cfg(tmp_path, resume=True), bank=small_bank(), log=lambda *a: None)
+    assert err.value.path == tmp_path / "checkpoint.pt"
+    assert "checkpoint" in err.value.problem
+
+
+def _truncated(trained, path):
+    data = (trained.run_dir / "checkpoint.pt").read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+
+
+def _without_counters(trained, path):
+    # A checkpoint of the PPO models only (as rsl-rl's own runner writes one).
+    torch.save(trained.trainer.alg.save(), path)
+
+
+@pytest.mark.parametrize(
+    "corrupt",
+    [
+        pytest.param(_truncated, id="truncated"),
+        pytest.param(lambda trained, path: path.write_bytes(b""), id="empty"),
+        pytest.param(
+            lambda trained, path: path.write_text("not a checkpoint\n" * 20),
+            id="text",
+        ),
+        pytest.param(
+            _without_counters,
+            id="no-counters",
+        ),
+    ],
+)
+def test_resume_from_a_corrupt_checkpoint_names_the_file(trained, tmp_path, corrupt):
+    corrupt(trained, tmp_path / "checkpoint.pt")
+    with pytest.raises(InputFileError) as err:
+        Trainer(make_cfg(tmp_path, resume=True), bank=small_bank(), log=lambda *a: None)
+    assert err.value.path == tmp_path / "checkpoint.pt"
+
+
+# --- target bank ----------------------------------------------------------------------------
+
+
+def test_build_bank_makes_and_caches_front_foot_targets(tmp_path):
+    cfg = make_cfg(tmp_path, bank_duration_s=8.0)
+    bank = build_bank(cfg)
+    assert bank.shape == (2, 400, 4) and bank.dtype == np.float32
+    assert np.all(np.isfinite(bank))
+    assert np.all(bank[:, :, 2:] == 0)  # rear-foot targets are 0 (paper)
+    assert bank[:, :, :2].max() > 0.02 and bank.min() >= 0
+    assert not np.array_equal(bank[0], bank[1])
+    # The run dir's copy is what a second call returns (it is not rebuilt).
+    cached = np.load(tmp_path / "bank.npy")
+    np.testing.assert_array_equal(cached, bank)
+    np.save(tmp_path / "bank.npy", bank[:1] * 0.5)
+    np.testing.assert_array_equal(build_bank(cfg), bank[:1] * 0.5)
+
+
+# --- CLI ------------------------------------------------------------------------------------
+
+
+def test_train_help():
+    result = CliRunner().invoke(app, ["train", "--help"])
+    assert result.exit_code == 0
+    for option in ("--engine", "--resume", "--reward", "--preset", "--run-dir"):
+        assert option in result.output
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["--engine", "nope"], "cpu or gpu"),
+        (["--preset", "huge"], "huge"),
+        (["--reward", "table1-9"], "table1-9"),
+    ],
+)
+def test_train_rejects_bad_options_before_any_work(tmp_path, args, needle):
+    run_dir = tmp_path / "run"
+    result = CliRunner().invoke(app, ["train", "--run-dir", str(run_dir), *args])
+    assert result.exit_code == 2
+    assert needle in result.output
+    assert not run_dir.exists()
+
+
+def test_cli_resume_without_checkpoint_is_one_line_and_exit_2(tmp_path, monkeypatch, capsys):
+    run_dir = tmp_path / "run"
+    argv = ["quaddance", "train", "--resume", "--run-dir", str(run_dir), "--num-envs", "2"]
+    monkeypatch.setattr(sys, "argv", [*argv, "--bank-size", "1", "--iterations", "1"])
+    with pytest.raises(SystemExit) as exc:
+        main()
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("quaddance: error:")
+    assert str(run_dir / "checkpoint.pt") in err[-1]
+    assert not any("Traceback" in line for line in err)
