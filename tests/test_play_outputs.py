@@ -122,6 +122,16 @@ def test_dance_metrics_values_and_keys() -> None:
     json.dumps(m, allow_nan=False)  # JSON-ready: no NaN anywhere
 
 
+def test_rear_feet_pressed_into_the_floor_count_as_no_lift() -> None:
+    t = np.arange(100) / 50.0
+    feet = np.zeros((100, 4))
+    feet[:, 2:] = -0.002  # soft-contact penetration
+    feet[10, 3] = 0.01
+    m = metrics.dance_metrics(t, np.zeros((100, 4)), feet, np.array([]), [], 1.0, None)
+    assert m["rear_lift_max_m"] == pytest.approx(0.01)
+    assert m["rear_lift_mean_m"] == pytest.approx(0.01 / 200)
+
+
 def test_identical_tracking_gives_zero_error_and_correlation_one() -> None:
     t = np.arange(300) / 50.0
     targets = np.zeros((300, 4))

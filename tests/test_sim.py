@@ -525,3 +525,47 @@ def test_dance_env_reward_terms_agree_on_both_engines(warp_engine_cls):
         for key, value in logs[0].items():
             other = logs[1][key].cpu()
             assert other.item() == pytest.approx(value.item(), rel=1e-2, abs=1e-6), key
+
+
+# --- front-lift feed-forward -----------------------------------------------------------------
+
+
+def test_lift_table_raises_the_front_foot_by_the_requested_height(model):
+    from quaddance.sim.feedforward import LUT_HEIGHTS_M, lift_table
+
+    table = lift_table()
+    data = mujoco.MjData(model)
+    site = model.site("FL").id
+    ti = model.joint("FL_thigh_joint").qposadr[0]
+    ci = model.joint("FL_calf_joint").qposadr[0]
+    data.qpos[:] = model.key("home").qpos
+    mujoco.mj_kinematics(model, data)
+    z0 = data.site_xpos[site][2]
+    for h, (d_thigh, d_calf) in zip(LUT_HEIGHTS_M, table, strict=True):
+        if h > 0.3:
+            break
+        data.qpos[:] = model.key("home").qpos
+        data.qpos[ti] += d_thigh
+        data.qpos[ci] += d_calf
+        mujoco.mj_kinematics(model, data)
+        # Exact to 1 cm up to 0.2 m; above, the calf nears its joint limit (2 cm).
+        assert data.site_xpos[site][2] - z0 == pytest.approx(h, abs=0.01 if h <= 0.2 else 0.02)
+    np.testing.assert_allclose(table[0], 0.0, atol=1e-9)
+
+
+def test_feedforward_moves_only_the_lifted_front_leg():
+    cfg = task_cfg(2)
+    bank = np.zeros((1, 200, 4), np.float32)
+    bank[0, :, 0] = 0.2  # FL up all the time, FR down
+    env = DanceEnv(cfg, bank, seed=0, random_start=False)
+    env.bank_idx[:] = 0
+    offset = env.joint_targets(torch.zeros(2, 12)) - env.nominal_joint_pos
+    fl = 3 * go1.MODEL_LEGS.index("FL")
+    moved = offset.abs().sum(0) > 1e-6
+    assert moved[fl + 1] and moved[fl + 2]  # FL thigh and calf
+    assert int(moved.sum()) == 2
+    cfg_off = task_cfg(2, front_feedforward=False)
+    env_off = DanceEnv(cfg_off, bank, seed=0, random_start=False)
+    torch.testing.assert_close(
+        env_off.joint_targets(torch.zeros(2, 12)), env_off.nominal_joint_pos.expand(2, -1)
+    )

@@ -27,6 +27,48 @@ SongArg = Annotated[Path, typer.Argument(help="Audio file: wav, flac, ogg or mp3
 # --- music -----------------------------------------------------------------------------------
 # (commands: analyze, demo-song)
 
+
+@app.command("analyze")
+def analyze_cmd(
+    song: SongArg,
+    out: Annotated[
+        Path, typer.Option("--out", "-o", help="Where to write the analysis JSON.")
+    ] = Path("analysis.json"),
+) -> None:
+    """Find the tempo, beats, downbeats, sections and envelopes of a song; write them as JSON."""
+    from rich.console import Console
+
+    from quaddance.music.analysis import analyze_file
+
+    with Console(stderr=True).status(f"Analysing {song.name}..."):
+        analysis = analyze_file(song)
+    analysis.save_json(out)
+    starts = ", ".join(f"{t:.1f}" for t in analysis.sections_s)
+    print(
+        f"{song.name}: {analysis.duration_s:.1f} s, tempo {analysis.tempo_bpm:.1f} BPM, "
+        f"{analysis.beats_s.size} beats, {analysis.downbeats_s.size} bars, "
+        f"{analysis.sections_s.size} sections (starting at {starts} s) -> {out}"
+    )
+
+
+@app.command("demo-song")
+def demo_song_cmd(
+    out: Annotated[Path, typer.Argument(help="Where to write the song (wav, flac or ogg).")] = Path(
+        "demo_song.wav"
+    ),
+) -> None:
+    """Write the built-in demo song: 30 s at 118 BPM, drums, bass and chords, made by code."""
+    from quaddance.music.synth import write_demo_song
+
+    if out.suffix.lower() not in (".wav", ".flac", ".ogg"):
+        raise typer.BadParameter(f"OUT must end in .wav, .flac or .ogg, got {out.name!r}")
+    truth = write_demo_song(out)
+    print(
+        f"demo song: {truth.duration_s:.0f} s, {truth.tempo_bpm:g} BPM, {truth.beats_s.size} beats,"
+        f" section change at {truth.section_change_s[0]:.2f} s -> {out}"
+    )
+
+
 # --- choreography ----------------------------------------------------------------------------
 # (command: choreograph)
 
@@ -316,6 +358,49 @@ def eval_cmd(
 
 # --- benchmarks ------------------------------------------------------------------------------
 # (bench subcommands: beats, choreograph, train, dance, reach)
+
+
+@bench_app.command("beats")
+def bench_beats_cmd(
+    out: Annotated[
+        Path, typer.Option("--out", "-o", help="Where to write the JSON results.")
+    ] = Path("benchmarks/results/beats.json"),
+    random: Annotated[
+        int, typer.Option(help="Random MIDI songs to add (a set the analyser was not tuned on).")
+    ] = 12,
+) -> None:
+    """Beat F-measure of our analyser and of librosa's default on songs with exact beats.
+
+    Needs fluidsynth and a General MIDI soundfont (apt-get install fluidsynth
+    fluid-soundfont-gm) to render the MIDI songs.
+    """
+    from rich.console import Console
+    from rich.table import Table
+
+    from quaddance.bench.beats import run_beat_bench
+
+    console = Console(stderr=True)
+    with console.status("Scoring beats...") as status:
+        results = run_beat_bench(
+            out, n_random=random, progress=lambda name: status.update(f"Scoring {name}...")
+        )
+    table = Table(title="beat F-measure (+-70 ms)")
+    for col in ("song", "BPM", "ours", "librosa default"):
+        table.add_column(col)
+    for row in results["songs"]:
+        table.add_row(
+            row["name"],
+            f"{row['true_tempo_bpm']:g}",
+            f"{row['f_quaddance']:.3f}",
+            f"{row['f_librosa_default']:.3f}",
+        )
+    for label, suffix in (("mean, designed set", ""), ("mean, random set", "_random")):
+        ours = results[f"mean_f_quaddance{suffix}"]
+        if ours is not None:
+            theirs = results[f"mean_f_librosa_default{suffix}"]
+            table.add_row(label, "", f"{ours:.3f}", f"{theirs:.3f}")
+    Console().print(table)
+    print(f"-> {out}")
 
 
 @bench_app.command("choreograph")

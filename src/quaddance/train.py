@@ -24,6 +24,7 @@ from quaddance.errors import InputFileError, QuaddanceError
 from quaddance.fileio import atomic_path, write_json
 from quaddance.sim import go1
 from quaddance.sim.config import DanceTaskCfg, RewardCfg
+from quaddance.sim.feedforward import LUT_HEIGHTS_M
 
 
 @dataclass(frozen=True)
@@ -342,7 +343,18 @@ def policy_metadata(env, cfg: TrainCfg, trainer: Trainer | None = None) -> dict:
         "foot_height": "height of the foot sphere's bottom above the floor, m",
         "nominal_joint_pos_rad": go1.nominal_joint_pos(),
         "action_scale": env.action_scale.cpu().tolist(),
-        "joint_target": "nominal_joint_pos_rad + action_scale * action",
+        "joint_target": (
+            "nominal_joint_pos_rad + action_scale * action"
+            + (" + front_feedforward(front targets 1 policy step ahead)" if env.feedforward else "")
+        ),
+        "front_feedforward": None
+        if env.feedforward is None
+        else {
+            "heights_m": LUT_HEIGHTS_M.tolist(),
+            "thigh_calf_offsets_rad": env.feedforward.table.cpu().tolist(),
+            "applies_to": ["FL", "FR"],
+            "interpolation": "linear in height, clamped to the table",
+        },
         "kp": task.scene.kp,
         "kd": task.scene.kd,
         "policy_hz": task.policy_hz,

@@ -1,23 +1,28 @@
 """Music analysis: tempo, beats, downbeats, onset and loudness envelopes, sections.
 
-The beat tracker follows the classic recipe (onset envelope -> tempo -> dynamic programming)
-with the changes that matter for dance music:
+The beat tracker follows the classic recipe (onset envelope -> tempo -> dynamic programming,
+Ellis 2007) with the changes that matter for dance music:
 
-1. The onset envelope is spectral flux on a log-mel spectrogram with extra weight on the low
-   band (kick and bass) so that the beat locks to the drums rather than to off-beat hats or
-   chord stabs, and it is normalised by its local level so that quiet intros still count.
-2. The tempo is chosen among the metrical levels of the strongest periodicity (T/2, 2T/3, T,
-   3T/2, 2T) by how well a beat comb of that tempo fits the onsets, with a log-normal prior
-   around the dance range (80-160 BPM) breaking near ties: half- and double-tempo errors
-   dominate beat-tracking errors (FACTS.md §4).
-3. The tempo may change: a local tempo curve is tracked (Viterbi over a windowed
-   autocorrelation, near the chosen tempo) and the dynamic program follows it.
+1. Two onset envelopes from a mel spectrogram, each divided by its local level so that a quiet
+   intro counts as much as a loud chorus: one for tempo (dB flux, full band + kick/bass band)
+   and one for placing beats (dB flux + treble flux with gentler compression, where snare, hats
+   and cymbals make drum hits stand out from off-beat bass notes and chord stabs).
+2. The tempo is the lag whose first four multiples carry the most autocorrelation (which rules
+   out the "2/3 tempo" error), times a broad log-normal prior centred in the dance range
+   (80-160 BPM), which settles the half/double-tempo choice where the music leaves it open:
+   octave errors dominate beat-tracking errors (FACTS.md §4).
+3. The tempo may change: a local tempo curve (Viterbi over windowed autocorrelation near the
+   global tempo, with drift and jumps) guides the dynamic program.
+4. Swing: beats that landed on swung off-beats are moved back onto the beat.
+5. Downbeats: the 4/4 bar phase with the most bass onsets and chord changes on beat 1.
+6. Sections: checkerboard novelty on bar-synchronous loudness, onset density and harmony.
 
 Envelopes are sampled at ``env_fps = sr / hop_length`` (43.07 frames/s at 22.05 kHz, hop 512).
 """
 
 from __future__ import annotations
 
+import itertools
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,7 +37,9 @@ BEATS_PER_BAR = 4  # 4/4 is assumed: nearly all dance music is in four
 
 @dataclass(frozen=True)
 class AnalysisConfig:
-    """Settings of the analyser; defaults are librosa's where not stated otherwise."""
+    """Settings of the analyser. Weights and costs marked "tuned" were set on the code-made
+    songs of ``bench/beats.py`` (not the demo song); the rest are librosa's defaults or
+    physical ranges."""
 
     hop_length: int = 512
     """Samples between envelope frames (librosa default; 23.2 ms at 22.05 kHz)."""
@@ -43,21 +50,23 @@ class AnalysisConfig:
     low_band_hz: float = 160.0
     """Upper edge of the kick/bass band, Hz (kick fundamentals lie at 40-120 Hz)."""
     low_band_weight: float = 1.0
-    """Weight of the low-band flux added to the full-band flux for tempo estimation."""
+    """Weight of the low-band flux added to the full-band flux for tempo estimation (tuned)."""
     high_band_hz: float = 3000.0
     """Lower edge of the treble band, Hz (snare noise, hats and cymbals)."""
     high_band_weight: float = 1.0
-    """Weight of the treble flux in the beat-placement onset envelope."""
+    """Weight of the treble flux in the beat-placement onset envelope (tuned)."""
     log_compression: float = 1e5
     """Gain inside log1p(gain * mel / max) of the treble onset: about 50 dB of range."""
     local_norm_s: float = 3.0
     """Window of the local level that the onset envelope is divided by, seconds."""
     min_bpm: float = 50.0
+    """Slowest tempo considered, BPM."""
     max_bpm: float = 220.0
+    """Fastest tempo considered, BPM."""
     prior_center_bpm: float = 120.0
     """Centre of the tempo prior: the middle of the dance range 80-160 BPM (FACTS.md §4)."""
     prior_sigma_octaves: float = 1.2
-    """Width of the log-normal tempo prior, octaves (tuned on code-made songs)."""
+    """Width of the log-normal tempo prior, octaves (tuned)."""
     tempo_harmonics: int = 4
     """Multiples of a beat period whose autocorrelation counts towards its salience."""
     tempo_window_s: float = 8.0
@@ -65,19 +74,18 @@ class AnalysisConfig:
     max_tempo_ratio: float = 1.3
     """Local tempo may stray this far (ratio) from the global tempo."""
     tempo_jump_cost: float = 3.0
-    """Cost of a sudden tempo change, in units of one 0.25 s step of clear evidence."""
+    """Cost of a sudden tempo change, in units of one 0.25 s step of clear evidence (tuned)."""
     tempo_deviation_cost: float = 2.0
-    """Cost of local tempo deviating from the global tempo, per squared octave."""
+    """Cost of local tempo deviating from the global tempo, per squared octave (tuned)."""
     tightness: float = 300.0
-    """Penalty on beat intervals that differ from the local period (librosa default 100)."""
-    onset_delay_s: float = 0.0
-    """Delay of the onset envelope's peaks behind the true onsets, removed from beat times."""
+    """Penalty on beat intervals off the local period (librosa's 100 is looser; our local
+    tempo curve already follows tempo changes; tuned)."""
     section_kernel_bars: int = 4
     """Bars compared on each side of a candidate section boundary."""
     section_min_bars: int = 2
     """Shortest section, bars."""
     section_threshold: float = 1.0
-    """Novelty a boundary needs: one unit = 3 dB louder or 50 % more onsets (tuned on code-made songs)."""
+    """Novelty a boundary needs; one unit = 3 dB louder or 50 % more onsets (tuned)."""
 
 
 @dataclass
@@ -94,6 +102,7 @@ class Analysis:
         sections_s: (n_sections,) start time of each section, seconds; the first is 0.0.
         duration_s: length of the audio, seconds.
         source: the file analysed, or "" for an array.
+        extra: diagnostics that are not saved (``global_tempo_bpm``: tempo before tracking).
     """
 
     tempo_bpm: float
@@ -137,22 +146,24 @@ class Analysis:
             data = json.loads(path.read_text())
         except (json.JSONDecodeError, UnicodeDecodeError) as err:
             raise InputFileError(path, f"is not valid JSON ({err})") from err
-        required = ("tempo_bpm", "beats_s", "downbeats_s", "onset_env", "rms_env", "env_fps")
-        missing = [k for k in (*required, "sections_s") if k not in data]
-        if not isinstance(data, dict) or missing:
+        if not isinstance(data, dict):
+            raise InputFileError(path, "is not a quaddance analysis (not a JSON object)")
+        array_keys = ("beats_s", "downbeats_s", "onset_env", "rms_env", "sections_s")
+        missing = [k for k in ("tempo_bpm", "env_fps", *array_keys) if k not in data]
+        if missing:
             raise InputFileError(path, f"is not a quaddance analysis (missing {missing})")
         try:
-            arrays = {
-                k: np.asarray(data[k], dtype=float)
-                for k in ("beats_s", "downbeats_s", "onset_env", "rms_env", "sections_s")
-            }
+            arrays = {k: np.asarray(data[k], dtype=float) for k in array_keys}
             env_fps = float(data["env_fps"])
-            duration_s = float(data.get("duration_s", len(arrays["rms_env"]) / env_fps))
             tempo_bpm = float(data["tempo_bpm"])
         except (TypeError, ValueError) as err:
             raise InputFileError(path, f"has a malformed field ({err})") from err
-        if env_fps <= 0 or any(a.ndim != 1 for a in arrays.values()):
-            raise InputFileError(path, "has a non-positive env_fps or a non-list field")
+        if not env_fps > 0 or any(a.ndim != 1 for a in arrays.values()):
+            raise InputFileError(path, "has a non-positive env_fps or a field that is not a list")
+        try:
+            duration_s = float(data.get("duration_s", len(arrays["rms_env"]) / env_fps))
+        except (TypeError, ValueError) as err:
+            raise InputFileError(path, f"has a malformed duration_s ({err})") from err
         return cls(
             tempo_bpm=tempo_bpm,
             env_fps=env_fps,
@@ -179,7 +190,8 @@ class _Features:
 def _moving_average(x: np.ndarray, width: int) -> np.ndarray:
     import scipy.ndimage
 
-    return scipy.ndimage.uniform_filter1d(x, size=max(1, width), mode="nearest")
+    # Reflecting (not repeating) the edge keeps a hit at 0 s from inflating its own average.
+    return scipy.ndimage.uniform_filter1d(x, size=max(1, width), mode="reflect")
 
 
 def _local_normalise(x: np.ndarray, fps: float, cfg: AnalysisConfig) -> np.ndarray:
@@ -194,20 +206,28 @@ def _features(y: np.ndarray, sr: int, cfg: AnalysisConfig) -> _Features:
     import librosa
 
     fps = sr / cfg.hop_length
+    # Lead the audio with silence so that a song starting on a hit gets a normal onset; the
+    # extra frames are dropped again below.
+    lead = -(-cfg.n_fft // cfg.hop_length)
+    y = np.concatenate([np.zeros(lead * cfg.hop_length, dtype=y.dtype), y])
     stft = np.abs(librosa.stft(y, n_fft=cfg.n_fft, hop_length=cfg.hop_length, center=True))
     power = stft**2
     mel = librosa.filters.mel(sr=sr, n_fft=cfg.n_fft, n_mels=cfg.n_mels, fmax=sr / 2) @ power
     mel_hz = librosa.mel_frequencies(n_mels=cfg.n_mels + 2, fmax=sr / 2)[1:-1]
     low, high = mel_hz <= cfg.low_band_hz, mel_hz >= cfg.high_band_hz
 
-    def flux(spec: np.ndarray, floor: float) -> np.ndarray:
-        # Silence (``floor``) before the first frame: a song that starts on a hit has an onset.
-        return np.maximum(0.0, np.diff(spec, axis=1, prepend=np.full((len(spec), 1), floor)))
+    def flux(spec: np.ndarray) -> np.ndarray:
+        full = np.maximum(0.0, np.diff(spec, axis=1, prepend=spec[:, :1]))
+        out = full[:, lead:].copy()
+        # A window centred before 0 s already hears a hit at 0 s: keep that onset at frame 0.
+        out[:, 0] = full[:, : lead + 1].max(axis=1)
+        return out
 
     # dB flux (80 dB range) hears every note start; the gentler log1p compression keeps loud
     # hits louder than soft ones, which is what separates drum hits from hats and stabs.
-    flux_db = flux(librosa.power_to_db(mel, ref=np.max, top_db=80.0), -80.0)
-    flux_log = flux(np.log1p(cfg.log_compression * mel / max(float(mel.max()), 1e-12)), 0.0)
+    flux_db = flux(librosa.power_to_db(mel, ref=np.max, top_db=80.0))
+    flux_log = flux(np.log1p(cfg.log_compression * mel / max(float(mel.max()), 1e-12)))
+    stft, power = stft[:, lead:], power[:, lead:]
     raw = flux_db.mean(axis=0)
     low_onset = flux_db[low].mean(axis=0) if low.any() else np.zeros_like(raw)
     high_onset = flux_log[high].mean(axis=0) if high.any() else np.zeros_like(raw)
@@ -220,7 +240,9 @@ def _features(y: np.ndarray, sr: int, cfg: AnalysisConfig) -> _Features:
         unit_mean(raw) + cfg.high_band_weight * unit_mean(high_onset), fps, cfg
     )
     rms = librosa.feature.rms(S=stft, frame_length=cfg.n_fft)[0]
-    chroma = librosa.feature.chroma_stft(S=power, sr=sr, n_fft=cfg.n_fft)
+    # tuning=0 assumes A440: estimating the tuning costs a third of the analysis time and
+    # chroma only needs to tell chords apart.
+    chroma = librosa.feature.chroma_stft(S=power, sr=sr, n_fft=cfg.n_fft, tuning=0.0)
     return _Features(tempo_onset, beat_onset, low_onset, raw, rms, chroma, fps)
 
 
@@ -354,7 +376,7 @@ def _track_beats(onset: np.ndarray, period: np.ndarray, tightness: float) -> np.
             score[t] = o[t] + cand[j]
             back[t] = prev[j]
     # Start backtracking at the best score in the last period.
-    tail = max(0, n - int(round(period[-1])))
+    tail = max(0, n - round(float(period[-1])))
     t = tail + int(np.argmax(score[tail:]))
     beats = [t]
     while back[t] >= 0:
@@ -389,14 +411,16 @@ def _swing_shift(beat_frames: np.ndarray, onset: np.ndarray) -> float:
 def _refine(beats: np.ndarray, onset: np.ndarray, radius: int = 1) -> np.ndarray:
     """Sub-frame beat positions: parabolic peak of the onset envelope near each beat frame."""
     out = beats.astype(float)
+    n = len(onset)
     for i, b in enumerate(beats):
-        a, c = max(1, b - radius), min(len(onset) - 2, b + radius)
-        if a > c:
-            continue
+        a, c = max(0, b - radius), min(n - 1, b + radius)
         j = a + int(np.argmax(onset[a : c + 1]))
-        y0, y1, y2 = onset[j - 1], onset[j], onset[j + 1]
-        denom = y0 - 2 * y1 + y2
-        out[i] = j + (0.5 * (y0 - y2) / denom if denom < 0 else 0.0)
+        out[i] = j
+        if 0 < j < n - 1:
+            y0, y1, y2 = onset[j - 1], onset[j], onset[j + 1]
+            denom = y0 - 2 * y1 + y2
+            if denom < 0:
+                out[i] = j + 0.5 * (y0 - y2) / denom
     return out
 
 
@@ -410,10 +434,7 @@ def _downbeat_phase(beat_frames: np.ndarray, feats: _Features) -> int:
     # Chords change on downbeats: distance between the mean chroma of the beats either side.
     bounds = np.append(idx, len(feats.rms))
     chroma = np.stack(
-        [
-            feats.chroma[:, a : max(b, a + 1)].mean(axis=1)
-            for a, b in zip(bounds[:-1], bounds[1:], strict=True)
-        ],
+        [feats.chroma[:, a : max(b, a + 1)].mean(axis=1) for a, b in itertools.pairwise(bounds)],
         axis=1,
     )
     chroma = chroma / (np.linalg.norm(chroma, axis=0, keepdims=True) + 1e-9)
@@ -434,8 +455,9 @@ def _sections(downbeat_frames: np.ndarray, feats: _Features, cfg: AnalysisConfig
     Each bar gets a feature vector in fixed units (loudness, onset density, bass density,
     harmony); a boundary before bar i scores the mean distance between the bars just before
     and just after it minus the mean distance within each side (Foote's checkerboard novelty
-    on bar-synchronous features). Local peaks above ``cfg.section_threshold`` win, strongest
-    first, at least ``cfg.section_min_bars`` apart.
+    on bar-synchronous features). The strongest boundary above ``cfg.section_threshold`` is
+    taken, then the next within the parts it leaves, each part at least
+    ``cfg.section_min_bars`` long.
     """
     n_bars = len(downbeat_frames) - 1
     k = cfg.section_kernel_bars
@@ -443,7 +465,7 @@ def _sections(downbeat_frames: np.ndarray, feats: _Features, cfg: AnalysisConfig
         return np.array([0])
     rms_db = 20.0 * np.log10(feats.rms + 1e-5)
     rows = []
-    for a, b in zip(downbeat_frames[:-1], downbeat_frames[1:], strict=True):
+    for a, b in itertools.pairwise(downbeat_frames):
         chroma = feats.chroma[:, a:b].mean(axis=1)
         rows.append(
             np.concatenate(
@@ -458,21 +480,26 @@ def _sections(downbeat_frames: np.ndarray, feats: _Features, cfg: AnalysisConfig
         )
     f = np.array(rows)
     dist = np.linalg.norm(f[:, None, :] - f[None, :, :], axis=-1)
-    novelty = np.zeros(n_bars)
-    for i in range(2, n_bars - 1):
-        before = slice(max(0, i - k), i)
-        after = slice(i, min(n_bars, i + k))
-        within = 0.5 * (dist[before, before].mean() + dist[after, after].mean())
-        novelty[i] = dist[before, after].mean() - within
-    # Novelty rises over several bars around a change; only its local peaks are boundaries.
-    peak = np.zeros(n_bars, dtype=bool)
-    peak[1:-1] = (novelty[1:-1] >= novelty[:-2]) & (novelty[1:-1] >= novelty[2:])
+    m = cfg.section_min_bars
     chosen: list[int] = []
-    for i in np.argsort(-novelty, kind="stable"):
-        if novelty[i] < cfg.section_threshold:
+    while True:
+        # Blocks stop at boundaries already found, so one big change (say, the end of a quiet
+        # intro) does not spill its novelty onto the bars next to it.
+        bounds = [0, *sorted(chosen), n_bars]
+        best, best_i = -np.inf, -1
+        for i in range(m, n_bars - m + 1):
+            j = int(np.searchsorted(bounds, i, side="right"))
+            lo, hi = bounds[j - 1], bounds[j]
+            if i - lo < m or hi - i < m:
+                continue
+            before, after = slice(max(lo, i - k), i), slice(i, min(hi, i + k))
+            within = 0.5 * (dist[before, before].mean() + dist[after, after].mean())
+            novelty = dist[before, after].mean() - within
+            if novelty > best:
+                best, best_i = novelty, i
+        if best < cfg.section_threshold:
             break
-        if peak[i] and all(abs(int(i) - j) >= cfg.section_min_bars for j in chosen):
-            chosen.append(int(i))
+        chosen.append(best_i)
     starts = [0]
     starts += [int(downbeat_frames[i]) for i in sorted(chosen)]
     return np.array(starts)
@@ -510,7 +537,7 @@ def analyze(y: np.ndarray, sr: int, cfg: AnalysisConfig | None = None) -> Analys
         beat_frames = np.round(beat_frames + shift * intervals).astype(int)
         beat_frames = beat_frames[beat_frames < len(feats.beat_onset)]
     beat_pos = _refine(beat_frames, feats.beat_onset)
-    beats_s = np.maximum(0.0, beat_pos / fps - cfg.onset_delay_s)
+    beats_s = beat_pos / fps
     phase = _downbeat_phase(beat_frames, feats)
     downbeat_frames = beat_frames[phase::BEATS_PER_BAR]
     section_frames = _sections(downbeat_frames, feats, cfg)
@@ -525,7 +552,7 @@ def analyze(y: np.ndarray, sr: int, cfg: AnalysisConfig | None = None) -> Analys
         env_fps=fps,
         sections_s=section_frames / fps,
         duration_s=len(y) / sr,
-        extra={"global_tempo_bpm": global_bpm, "period_frames": period},
+        extra={"global_tempo_bpm": global_bpm},
     )
 
 
@@ -534,8 +561,8 @@ def _trim_silence(beat_frames: np.ndarray, rms: np.ndarray) -> np.ndarray:
     import scipy.ndimage
 
     loud = scipy.ndimage.maximum_filter1d(rms, size=9) > 10 ** (-50 / 20) * rms.max()
-    if not loud.any():
-        return beat_frames
+    if not loud.any():  # digital silence has no beats
+        return beat_frames[:0]
     first, last = np.argmax(loud), len(loud) - 1 - np.argmax(loud[::-1])
     return beat_frames[(beat_frames >= first - 2) & (beat_frames <= last + 2)]
 

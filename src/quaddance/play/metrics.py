@@ -262,7 +262,8 @@ def dance_metrics(
     duration_s = float(time[-1] - time[0] + dt_s)
     feasible = feasible_mask(targets, feasible_max_m, ground_tol_m)
     rear = feet[:, 2:4]
-    rear = rear[np.isfinite(rear)]
+    # Lift is height above the floor; soft-contact penetration (< 0) is no lift.
+    rear = np.clip(rear[np.isfinite(rear)], 0.0, None)
     bas = beat_align_score(feet[:, :2], 1.0 / dt_s, np.asarray(beats_s, dtype=float) - time[0])
     return {
         "duration_s": duration_s,

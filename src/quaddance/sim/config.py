@@ -94,6 +94,9 @@ class DanceTaskCfg:
     decimation: int = 4  # released code: 0.005 s x 4
     action_scale: float = 0.25  # released code
     hip_scale_factor: float = 0.5  # released code: hips x0.5
+    # Ours: add to each front leg the joint offsets that lift its foot to the target
+    # (quaddance.sim.feedforward); the policy corrects and balances.
+    front_feedforward: bool = True
     max_tilt_rad: float = 1.0  # termination
     min_base_height_m: float = 0.12  # termination
     scene: SceneCfg = field(default_factory=SceneCfg)

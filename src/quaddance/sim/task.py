@@ -17,6 +17,7 @@ from tensordict import TensorDict
 from quaddance.sim import go1, observations, rewards, terminations
 from quaddance.sim.config import DanceTaskCfg
 from quaddance.sim.engines import make_engine, nominal_dynamics
+from quaddance.sim.feedforward import FrontLiftFeedforward
 from quaddance.sim.state import RobotState, state_from_arrays
 
 
@@ -79,6 +80,7 @@ class DanceEnv(VecEnv):
         scale = torch.full((go1.NUM_JOINTS,), cfg.action_scale, device=dev)
         scale[0::3] *= cfg.hip_scale_factor  # hips are every third joint in model order
         self.action_scale = scale
+        self.feedforward = FrontLiftFeedforward(cfg.scene, dev) if cfg.front_feedforward else None
         lo = torch.tensor(model.jnt_range[1:, 0], dtype=torch.float32, device=dev)
         hi = torch.tensor(model.jnt_range[1:, 1], dtype=torch.float32, device=dev)
         mid, half = (lo + hi) / 2, (hi - lo) / 2 * 0.9
@@ -137,7 +139,7 @@ class DanceEnv(VecEnv):
         self.prev_prev_action, self.prev_action = self.prev_action, self.last_action
         self.last_action = actions
         self.prev_joint_vel = self.robot.joint_vel
-        target = self.nominal_joint_pos + self.action_scale * actions
+        target = self.joint_targets(actions)
         self._target_hist = torch.cat([target.unsqueeze(1), self._target_hist[:, :2]], dim=1)
         self.robot = self._read_state(self.engine.step(self._lagged_controls()))
         self.episode_length_buf += 1
@@ -155,6 +157,14 @@ class DanceEnv(VecEnv):
         if done.any():
             self.reset_envs(done.nonzero().squeeze(1))
         return self.get_observations(), reward, done, extras
+
+    def joint_targets(self, actions: torch.Tensor) -> torch.Tensor:
+        """PD targets: nominal pose + front-lift feed-forward for the targets due after this
+        step + scaled actions (the contract written into the policy's JSON)."""
+        target = self.nominal_joint_pos + self.action_scale * actions
+        if self.feedforward is not None:
+            target = target + self.feedforward(self.targets_at(1)[:, :2])
+        return target
 
     # --- internals -------------------------------------------------------------------------------
     def _lagged_controls(self) -> torch.Tensor:

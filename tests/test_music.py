@@ -1,0 +1,222 @@
+"""Music in: decoding, beat tracking, downbeats, sections, the demo song, the analyze CLI."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import soundfile as sf
+from typer.testing import CliRunner
+
+from quaddance.bench.beats import (
+    BENCH_SONGS,
+    INSTALL_HINT,
+    TICKS_PER_BEAT,
+    beat_f_measure,
+    render_midi,
+    write_midi,
+)
+from quaddance.cli import app
+from quaddance.errors import InputFileError, QuaddanceError
+from quaddance.music.analysis import Analysis, analyze, analyze_file
+from quaddance.music.audio import load_audio
+from quaddance.music.synth import DEMO_TEMPO_BPM, render_song
+
+SR = 22050
+JSON_KEYS = {"tempo_bpm", "beats_s", "downbeats_s", "onset_env", "rms_env", "env_fps", "sections_s"}
+
+
+# --- the F-measure ----------------------------------------------------------------------------
+
+
+def test_f_measure_counts_hits_within_70_ms_one_to_one() -> None:
+    ref = np.arange(10) * 0.5
+    assert beat_f_measure(ref, ref + 0.06) == pytest.approx(1.0)
+    assert beat_f_measure(ref, ref + 0.08) == 0.0
+    # Double tempo: every reference beat is found (recall 1) but half the estimates are extra.
+    assert beat_f_measure(ref, np.arange(20) * 0.25) == pytest.approx(2 * 0.5 / 1.5)
+    # Two estimates next to one reference beat: only one of them may count.
+    assert beat_f_measure([1.0], [0.98, 1.02]) == pytest.approx(2 * 0.5 * 1.0 / 1.5)
+    assert beat_f_measure(ref, []) == 0.0
+
+
+# --- the synthesiser --------------------------------------------------------------------------
+
+
+def test_render_song_truth_matches_its_tempo_map() -> None:
+    y, truth = render_song(100.0, 12.0, seed=1, tempo_change=(6.0, 125.0))
+    assert y.dtype == np.float32 and y.shape == (12 * SR,)
+    gaps = np.diff(truth.beats_s)
+    assert np.allclose(gaps[truth.beats_s[1:] <= 6.0], 0.6)
+    assert np.allclose(gaps[truth.beats_s[:-1] >= 6.0], 60.0 / 125.0)
+    assert np.all(np.isin(truth.downbeats_s, truth.beats_s))
+    assert np.all(np.isin(truth.section_change_s, truth.downbeats_s))
+    y2, _ = render_song(100.0, 12.0, seed=1, tempo_change=(6.0, 125.0))
+    assert np.array_equal(y, y2)  # same seed, same song
+
+
+# --- beat tracking ----------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("tempo_bpm", "kwargs"),
+    [
+        (96.0, {"swing": 0.8, "intro_s": 4.0, "seed": 11}),  # swung, with a quiet intro
+        (138.0, {"syncopation": True, "seed": 12}),  # off-beat stabs, kick and bass
+        (100.0, {"tempo_change": (10.0, 124.0), "seed": 13}),  # tempo change at 10 s
+    ],
+)
+def test_beats_found_on_generated_songs(tempo_bpm: float, kwargs: dict) -> None:
+    y, truth = render_song(tempo_bpm, 20.0, sr=SR, **kwargs)
+    result = analyze(y, SR)
+    assert beat_f_measure(truth.beats_s, result.beats_s) >= 0.85
+    # The right tempo octave: the median beat interval matches the song's final tempo.
+    assert result.tempo_bpm == pytest.approx(truth.extra["final_tempo_bpm"], rel=0.04)
+    assert beat_f_measure(truth.downbeats_s, result.downbeats_s) >= 0.8
+    # Each true section change is found within one bar.
+    bar_s = 4 * 60.0 / truth.extra["final_tempo_bpm"]
+    for change_s in truth.section_change_s:
+        assert np.min(np.abs(result.sections_s - change_s)) < bar_s
+
+
+def test_demo_song_beats_downbeats_and_section(demo_song: tuple[Path, object]) -> None:
+    path, truth = demo_song
+    result = analyze_file(path)
+    assert result.source == str(path)
+    assert result.tempo_bpm == pytest.approx(DEMO_TEMPO_BPM, abs=1.0)
+    assert beat_f_measure(truth.beats_s, result.beats_s) >= 0.95
+    assert beat_f_measure(truth.downbeats_s, result.downbeats_s) >= 0.9
+    assert result.sections_s[0] == 0.0
+    assert np.min(np.abs(result.sections_s[1:] - truth.section_change_s[0])) < 0.1
+    n_frames = round(result.duration_s * result.env_fps)
+    assert abs(result.onset_env.size - n_frames) <= 1
+    assert result.rms_env.size == result.onset_env.size
+    # The loud second section is louder in the RMS envelope.
+    cut = round(truth.section_change_s[0] * result.env_fps)
+    assert result.rms_env[cut:].mean() > 1.5 * result.rms_env[:cut].mean()
+
+
+def test_silence_has_no_beats() -> None:
+    result = analyze(np.zeros(3 * SR, dtype=np.float32), SR)
+    assert result.beats_s.size == 0 and result.sections_s.tolist() == [0.0]
+
+
+# --- decoding ---------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("fmt", ["wav", "flac", "ogg", "mp3"])
+def test_load_audio_formats(tmp_path: Path, fmt: str) -> None:
+    if fmt.upper() not in sf.available_formats():
+        pytest.skip(f"this libsndfile ({sf.__libsndfile_version__}) cannot write {fmt}")
+    y, _ = render_song(120.0, 3.0, seed=2, sr=44100)
+    stereo = np.stack([y, 0.5 * y], axis=1)
+    path = tmp_path / f"song.{fmt}"
+    sf.write(str(path), stereo, 44100, format=fmt.upper())
+    loaded, sr = load_audio(path, sr=SR)
+    assert sr == SR and loaded.dtype == np.float32 and loaded.ndim == 1
+    assert abs(loaded.size - 3 * SR) <= 0.01 * SR
+    import librosa
+
+    expected = 0.75 * librosa.resample(y, orig_sr=44100, target_sr=SR)
+    n = min(loaded.size, expected.size)
+    # Mono mix of (y, y/2) is 0.75 y; lossy codecs keep the waveform close.
+    assert np.corrcoef(loaded[:n], expected[:n])[0, 1] > 0.9
+    assert np.max(np.abs(loaded)) == pytest.approx(np.max(np.abs(expected)), rel=0.15)
+
+
+def _write(path: Path, y: np.ndarray) -> Path:
+    sf.write(str(path), y, SR)
+    return path
+
+
+@pytest.mark.parametrize(
+    ("name", "make", "words"),
+    [
+        ("missing.wav", lambda p: p, "no such file"),
+        ("empty.wav", lambda p: p.write_bytes(b"") and p, "empty"),
+        ("corrupt.wav", lambda p: p.write_bytes(b"RIFF\x00\x01garbage" * 50) and p, "corrupt"),
+        ("corrupt.mp3", lambda p: p.write_bytes(bytes(range(256)) * 20) and p, "corrupt"),
+        ("silent.wav", lambda p: _write(p, np.zeros(3 * SR, dtype=np.float32)), "silent"),
+        ("short.wav", lambda p: _write(p, 0.5 * np.ones(SR // 2, dtype=np.float32)), "too short"),
+        ("song.xyz", lambda p: p.write_bytes(b"\x00" * 100) and p, "unsupported file type"),
+    ],
+)
+def test_load_audio_errors_name_the_file(tmp_path: Path, name: str, make, words: str) -> None:
+    path = tmp_path / name
+    make(path)
+    with pytest.raises(InputFileError) as info:
+        load_audio(path)
+    assert name in str(info.value) and words in str(info.value)
+
+
+# --- the analysis file and the CLI ------------------------------------------------------------
+
+
+def test_analysis_json_round_trip_and_bad_files(tmp_path: Path) -> None:
+    y, _ = render_song(110.0, 8.0, seed=4)
+    result = analyze(y, SR)
+    path = tmp_path / "a.json"
+    result.save_json(path)
+    back = Analysis.load_json(path)
+    assert back.tempo_bpm == pytest.approx(result.tempo_bpm, abs=1e-3)
+    assert np.allclose(back.beats_s, result.beats_s, atol=1e-4)
+    assert np.allclose(back.rms_env, result.rms_env, atol=1e-6)
+    bad = tmp_path / "bad.json"
+    bad.write_text("{not json")
+    with pytest.raises(InputFileError, match=r"bad\.json"):
+        Analysis.load_json(bad)
+    bad.write_text(json.dumps({"tempo_bpm": 120}))
+    with pytest.raises(InputFileError, match="missing"):
+        Analysis.load_json(bad)
+
+
+def test_analyze_cli_writes_all_keys(demo_song: tuple[Path, object], tmp_path: Path) -> None:
+    path, truth = demo_song
+    out = tmp_path / "out" / "analysis.json"
+    result = CliRunner().invoke(app, ["analyze", str(path), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "118" in result.output and "sections" in result.output
+    data = json.loads(out.read_text())
+    assert set(data) >= JSON_KEYS
+    assert len(data["beats_s"]) == pytest.approx(truth.beats_s.size, abs=1)
+    assert len(data["onset_env"]) == len(data["rms_env"]) > 1000
+    missing = CliRunner().invoke(app, ["analyze", str(tmp_path / "nope.wav")])
+    assert isinstance(missing.exception, InputFileError)
+
+
+def test_demo_song_cli_is_deterministic(demo_song: tuple[Path, object], tmp_path: Path) -> None:
+    path, _ = demo_song
+    out = tmp_path / "again.wav"
+    result = CliRunner().invoke(app, ["demo-song", str(out)])
+    assert result.exit_code == 0, result.output
+    assert out.read_bytes() == path.read_bytes()
+    assert sf.info(str(out)).duration == pytest.approx(30.0, abs=0.01)
+
+
+# --- the benchmark's songs --------------------------------------------------------------------
+
+
+def test_bench_midi_beats_follow_the_tempo_map(tmp_path: Path) -> None:
+    import mido
+
+    spec = next(s for s in BENCH_SONGS if s.tempo_change is not None)
+    beats_s = write_midi(spec, tmp_path / "song.mid")
+    midi = mido.MidiFile(str(tmp_path / "song.mid"))
+    assert midi.ticks_per_beat == TICKS_PER_BEAT
+    gaps = np.diff(beats_s)
+    assert gaps[0] == pytest.approx(60.0 / spec.tempo_bpm)
+    assert gaps[-1] == pytest.approx(60.0 / spec.tempo_change[1])
+    # mido's own clock agrees with our beat times at the end of the song.
+    assert midi.length == pytest.approx(beats_s[-1] + gaps[-1], abs=0.05)
+
+
+def test_bench_without_fluidsynth_says_how_to_install(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(shutil, "which", lambda name: None)
+    with pytest.raises(QuaddanceError, match="apt-get install"):
+        render_midi(tmp_path / "a.mid", tmp_path / "a.wav", tmp_path / "gm.sf2")
+    assert "fluidsynth" in INSTALL_HINT
