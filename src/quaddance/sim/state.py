@@ -6,6 +6,7 @@ the same function, so the task cannot tell which engine ran the physics.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import mujoco
@@ -57,19 +58,19 @@ class RobotState:
     base_contact: torch.Tensor  # (N,) bool
     leg_contacts: torch.Tensor  # (N,) number of thighs/calves touching the floor
 
-    @property
+    @functools.cached_property
     def foot_height_m(self) -> torch.Tensor:
         """(N, 4) height of each foot's bottom above the floor: THE foot height of quaddance."""
         return self.foot_pos_w[..., 2] - go1.FOOT_RADIUS_M
 
-    @property
+    @functools.cached_property
     def projected_gravity_b(self) -> torch.Tensor:
         """(N, 3) unit gravity direction in the body frame."""
         gravity_w = torch.zeros_like(self.base_lin_vel_w)
         gravity_w[:, 2] = -1.0
         return quat_rotate_inverse(self.base_quat_w, gravity_w)
 
-    @property
+    @functools.cached_property
     def base_lin_vel_b(self) -> torch.Tensor:
         return quat_rotate_inverse(self.base_quat_w, self.base_lin_vel_w)
 
@@ -90,10 +91,9 @@ def state_from_arrays(
     The free joint's qvel holds the linear velocity in the world frame and the angular
     velocity in the body frame (MuJoCo convention).
     """
-    dev = sensordata.device
 
     def cols(idx: tuple[int, ...]) -> torch.Tensor:
-        return sensordata[:, torch.as_tensor(idx, device=dev)]
+        return sensordata[:, _index(idx, sensordata.device)]
 
     n = qpos.shape[0]
     return RobotState(
@@ -109,6 +109,12 @@ def state_from_arrays(
         base_contact=sensordata[:, layout.base_contact] > 0.5,
         leg_contacts=(cols(layout.leg_contact) > 0.5).sum(dim=1),
     )
+
+
+@functools.lru_cache(maxsize=64)
+def _index(idx: tuple[int, ...], device: torch.device) -> torch.Tensor:
+    # Index tensors are built once, not on every step.
+    return torch.as_tensor(idx, device=device)
 
 
 def nominal_qpos(model: mujoco.MjModel) -> np.ndarray:

@@ -98,6 +98,7 @@ class DanceEnv(VecEnv):
         self.joint_offset = z(n, j)
         self.dynamics = self._variants[torch.zeros(n, dtype=torch.long, device=dev)]
         self.history = z(n, cfg.obs.history_len, observations.PROPRIO_DIM)
+        self._last_proprio: torch.Tensor | None = None
         self.robot: RobotState = self._read_state()
         self.reset_all()
 
@@ -112,6 +113,7 @@ class DanceEnv(VecEnv):
     # --- VecEnv interface ----------------------------------------------------------------------
     def get_observations(self) -> TensorDict:
         prop = observations.proprio(self)
+        self._last_proprio = prop  # the next step's history frame
         actor = torch.cat(
             [
                 prop,
@@ -133,9 +135,11 @@ class DanceEnv(VecEnv):
         actions = actions.to(self.device).clamp(-10.0, 10.0)
         # History of what the policy saw, before the state changes.
         if cfg.obs.history_len:
-            self.history = torch.cat(
-                [observations.proprio(self).unsqueeze(1), self.history[:, :-1]], dim=1
+            # The proprio frame of the last observation is this state's (same tensors).
+            prop = (
+                self._last_proprio if self._last_proprio is not None else observations.proprio(self)
             )
+            self.history = torch.cat([prop.unsqueeze(1), self.history[:, :-1]], dim=1)
         self.prev_prev_action, self.prev_action = self.prev_action, self.last_action
         self.last_action = actions
         self.prev_joint_vel = self.robot.joint_vel
