@@ -120,27 +120,15 @@ def build_spec(cfg: SceneCfg = SceneCfg(), visual: bool = True) -> mujoco.MjSpec
         act.forcerange = [-effort, effort]
 
     # Sensors, read by every engine in this order (see quaddance.sim.state.SensorLayout).
-    for foot in go1.FEET:
-        spec.add_sensor(
-            name=f"{foot}_pos",
-            type=mujoco.mjtSensor.mjSENS_FRAMEPOS,
-            objtype=mujoco.mjtObj.mjOBJ_SITE,
-            objname=foot,
-        )
-    for foot in go1.FEET:
-        spec.add_sensor(
-            name=f"{foot}_vel",
-            type=mujoco.mjtSensor.mjSENS_FRAMELINVEL,
-            objtype=mujoco.mjtObj.mjOBJ_SITE,
-            objname=foot,
-        )
-    for name in go1.JOINT_NAMES:
-        spec.add_sensor(
-            name=f"{name}_torque",
-            type=mujoco.mjtSensor.mjSENS_ACTUATORFRC,
-            objtype=mujoco.mjtObj.mjOBJ_ACTUATOR,
-            objname=name.removesuffix("_joint"),
-        )
+    site, actuator = mujoco.mjtObj.mjOBJ_SITE, mujoco.mjtObj.mjOBJ_ACTUATOR
+    sensors = [(f"{f}_pos", mujoco.mjtSensor.mjSENS_FRAMEPOS, site, f) for f in go1.FEET]
+    sensors += [(f"{f}_vel", mujoco.mjtSensor.mjSENS_FRAMELINVEL, site, f) for f in go1.FEET]
+    sensors += [
+        (f"{j}_torque", mujoco.mjtSensor.mjSENS_ACTUATORFRC, actuator, j.removesuffix("_joint"))
+        for j in go1.JOINT_NAMES
+    ]
+    for name, sensor_type, objtype, objname in sensors:
+        spec.add_sensor(name=name, type=sensor_type, objtype=objtype, objname=objname)
     # Contacts with the floor of the trunk (termination) and of the thighs and the upper calf
     # capsules near the knees (collision penalty); the calf bodies also hold the feet.
     contacts = [("trunk", mujoco.mjtObj.mjOBJ_BODY, "trunk")]
