@@ -15,8 +15,6 @@ NUM_JOINTS = len(JOINT_NAMES)
 
 # The task's foot order everywhere in quaddance (targets, observations, metrics).
 FEET: tuple[str, ...] = ("FL", "FR", "RL", "RR")
-FRONT_FEET = (0, 1)
-REAR_FEET = (2, 3)
 FOOT_RADIUS_M = 0.023  # sphere radius of `*_foot_collision` in go1.xml
 
 # Nominal joint positions (released code): hips +-0.1 (left legs out), thighs 0.8 front /

@@ -10,7 +10,6 @@ import functools
 from dataclasses import dataclass
 
 import mujoco
-import numpy as np
 import torch
 
 from quaddance.sim import go1
@@ -115,8 +114,3 @@ def state_from_arrays(
 def _index(idx: tuple[int, ...], device: torch.device) -> torch.Tensor:
     # Index tensors are built once, not on every step.
     return torch.as_tensor(idx, device=device)
-
-
-def nominal_qpos(model: mujoco.MjModel) -> np.ndarray:
-    """The "home" keyframe's qpos: standing in the nominal pose."""
-    return model.key("home").qpos.copy()

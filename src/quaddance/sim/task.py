@@ -7,8 +7,6 @@ playback (one env, no randomisation) use this same class.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import torch
 from rsl_rl.env import VecEnv
@@ -268,7 +266,3 @@ class DanceEnv(VecEnv):
         return observations.observation_layout(
             self.cfg.obs.history_len, len(self.preview_steps), self.cfg.obs.privileged_critic
         )
-
-
-def episode_steps(duration_s: float, policy_hz: float) -> int:
-    return math.ceil(duration_s * policy_hz)
