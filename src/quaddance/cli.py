@@ -328,6 +328,9 @@ def eval_cmd(
         typer.Option(help="Write the held-out set (8 songs, 2 motions) here and evaluate it."),
     ] = None,
     seed: Annotated[int, typer.Option(help="Choreographer seed.")] = 0,
+    randomize: Annotated[
+        bool, typer.Option(help="Randomise the robot's dynamics as in training (robustness).")
+    ] = False,
 ) -> None:
     """Run a policy over many songs/motions (no video): metrics per item, mean, plot."""
     from rich.console import Console
@@ -347,7 +350,7 @@ def eval_cmd(
         def step(i: int, n: int, name: str) -> None:
             bar.update(task, completed=i, description=f"evaluating {name}")
 
-        rows = evaluate(todo, policy, report, seed=seed, progress=step)
+        rows = evaluate(todo, policy, report, seed=seed, progress=step, randomize=randomize)
     s = summarize(rows)
     print(
         f"{s['items']} items, {s['falls']} falls; feasible MAE "

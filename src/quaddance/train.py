@@ -7,9 +7,11 @@ curve), TensorBoard logs under `tb/`, and at the end `policy.onnx` + `policy.jso
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import csv
 import dataclasses
+import io
 import json
 import math
 import time
@@ -170,7 +172,11 @@ class Trainer:
 
         self.alg_cfg = rsl_rl_cfg(self.preset, cfg)
         obs = self.env.get_observations()
-        self.alg = PPO.construct_algorithm(obs, self.env, copy.deepcopy(self.alg_cfg), self.device)
+        # rsl-rl prints both networks in full; the run's policy.json describes them instead.
+        with contextlib.redirect_stdout(io.StringIO()):
+            self.alg = PPO.construct_algorithm(
+                obs, self.env, copy.deepcopy(self.alg_cfg), self.device
+            )
         self.iteration = 0
         self.env_steps = 0
         self.wall_s = 0.0

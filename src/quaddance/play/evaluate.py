@@ -110,8 +110,12 @@ def evaluate(
     report: Path,
     seed: int = 0,
     progress: Callable[[int, int, str], None] | None = None,
+    randomize: bool = False,
 ) -> list[dict[str, Any]]:
-    """Dance each item without video; write a markdown table (+ mean) and a plot."""
+    """Dance each item without video; write a markdown table (+ mean) and a plot.
+
+    ``randomize`` draws the robot's dynamics as in training (friction, mass, strength,
+    joint offsets, action lag, pushes): a robustness check."""
     import tempfile
 
     from quaddance.play.dance import DanceJob, run_dance
@@ -138,7 +142,7 @@ def evaluate(
     plot_path = report.with_suffix(".png")
     plot_eval(plot_path, rows)
     with atomic_path(report) as tmp:
-        tmp.write_text(markdown_report(rows, policy, plot_path.name))
+        tmp.write_text(markdown_report(rows, policy, plot_path.name, randomize))
     return rows
 
 
@@ -168,7 +172,9 @@ def summarize(rows: Sequence[dict[str, Any]]) -> dict[str, float | None]:
     }
 
 
-def markdown_report(rows: Sequence[dict[str, Any]], policy: Path | None, plot_name: str) -> str:
+def markdown_report(
+    rows: Sequence[dict[str, Any]], policy: Path | None, plot_name: str, randomize: bool = False
+) -> str:
     head = (
         "| item | falls | FL MAE feas. (cm) | FR MAE feas. (cm) | FL corr feas. | FR corr feas. "
         "| FL MAE (cm) | FR MAE (cm) | rear lift mean / max (cm) | BAS | sim x real time |\n"
@@ -193,8 +199,9 @@ def markdown_report(rows: Sequence[dict[str, Any]], policy: Path | None, plot_na
         f"{_num(s['bas'])} | {_num(s['realtime_factor_sim'], 1, 1)} |"
     )
     return (
-        f"# quaddance evaluation\n\npolicy: `{policy or 'shipped'}`, {len(rows)} items, no "
-        "domain randomisation. MAE/corr per front foot; *feas.* = the feasible part of the "
+        f"# quaddance evaluation\n\npolicy: `{policy or 'shipped'}`, {len(rows)} items, "
+        + ("dynamics randomised as in training" if randomize else "no domain randomisation")
+        + ". MAE/corr per front foot; *feas.* = the feasible part of the "
         "targets (see `quaddance.play.metrics`).\n\n"
         + head
         + "\n".join(lines)
