@@ -375,3 +375,18 @@ def test_simplified_meshes_keep_valid_triangles(scene_model) -> None:
         faces = model.mesh_face[adr : adr + num]
         assert faces.min() >= 0 and faces.max() < model.mesh_vertnum[i]
         assert np.all((faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]))
+
+
+def test_learning_curve_plot_from_a_curve_csv(tmp_path) -> None:
+    from quaddance.play.plots import plot_learning_curve
+
+    csv_path = tmp_path / "curve.csv"
+    lines = ["iteration,env_steps,wall_s,front_abs_err_m,fall_rate,rear_lift_m"]
+    lines += [f"{i},{i * 6144},{i * 1.2},{0.03 / i},{1 / i},{0.01 / i}" for i in range(1, 120)]
+    csv_path.write_text("\n".join(lines) + "\n")
+    out = plot_learning_curve(tmp_path / "curve.png", csv_path)
+    assert out.stat().st_size > 10_000
+    empty = tmp_path / "empty.csv"
+    empty.write_text("iteration,env_steps\n")
+    with pytest.raises(QuaddanceError, match="no rows"):
+        plot_learning_curve(tmp_path / "x.png", empty)

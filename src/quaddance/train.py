@@ -317,6 +317,11 @@ class Trainer:
         onnx_path, json_path = out_dir / "policy.onnx", out_dir / "policy.json"
         export_onnx(self.alg.get_policy(), onnx_path)
         write_json(json_path, policy_metadata(self.env, self.cfg, self))
+        curve = self.cfg.run_dir / "curve.csv"
+        if curve.exists():
+            from quaddance.play.plots import plot_learning_curve
+
+            plot_learning_curve(out_dir / "curve.png", curve)
         return onnx_path, json_path
 
 

@@ -181,3 +181,42 @@ def plot_eval(path: str | Path, rows: Sequence[Mapping[str, Any]]) -> Path:
     axes[2].grid(axis="y", alpha=0.3)
     _save(fig, path)
     return Path(path)
+
+
+def plot_learning_curve(path: str | Path, curve_csv: str | Path) -> Path:
+    """Training curve from a run's `curve.csv`: front-foot tracking error, falls per ended
+    episode and rear-foot lift against env steps (bottom axis) and wall-clock minutes (top)."""
+    import csv
+
+    with Path(curve_csv).open() as f:
+        rows = list(csv.DictReader(f))
+    if not rows:
+        raise QuaddanceError(f"{curve_csv}: no rows to plot")
+    col = {k: np.array([float(r[k]) for r in rows]) for k in rows[0]}
+    steps_m = col["env_steps"] / 1e6
+    plt = _pyplot()
+    fig, axes = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
+    series = [
+        ("front_abs_err_m", 100.0, "front-foot |h - h*| (cm)"),
+        ("fall_rate", 1.0, "falls per ended episode"),
+        ("rear_lift_m", 100.0, "rear-foot lift (cm)"),
+    ]
+    for ax, (key, scale, label) in zip(axes, series, strict=True):
+        ax.plot(steps_m, col[key] * scale, color="0.75", lw=0.8)
+        k = max(1, len(rows) // 50)  # running mean over about 2 % of the run
+        smooth = np.convolve(col[key] * scale, np.ones(k) / k, mode="valid")
+        ax.plot(steps_m[k - 1 :], smooth, color="tab:blue", lw=1.6)
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel("env steps (millions)")
+    top = axes[0].secondary_xaxis(
+        "top",
+        functions=(
+            lambda s: np.interp(s, steps_m, col["wall_s"] / 60.0),
+            lambda m: np.interp(m, col["wall_s"] / 60.0, steps_m),
+        ),
+    )
+    top.set_xlabel("wall-clock minutes of training")
+    fig.tight_layout()
+    _save(fig, path)
+    return Path(path)
