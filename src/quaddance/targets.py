@@ -317,7 +317,9 @@ def _fit_in_time(lifts: list[_Lift], cfg: TargetConfig, end_s: float) -> list[_L
             rise = max(wish[id(lift)][0], need_next)
             if fall + rise > room:
                 # Squeeze the slack above the bounded minimum, both sides alike.
-                squeeze = (room - need_prev - need_next) / (fall + rise - need_prev - need_next)
+                slack = fall + rise - need_prev - need_next
+                # A lowered lift can fill the room exactly: then nothing is left to squeeze.
+                squeeze = max(0.0, (room - need_prev - need_next) / slack) if slack > 1e-12 else 0.0
                 fall = need_prev + squeeze * (fall - need_prev)
                 rise = need_next + squeeze * (rise - need_next)
             prev.fall_s, lift.rise_s = fall, rise
