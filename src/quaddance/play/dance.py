@@ -30,6 +30,7 @@ class DanceJob:
     seed: int = 0
     video: bool = True
     randomize: bool = False
+    sim_seed: int | None = None  # seed of the randomised dynamics; None: `seed`
     width: int = 640
     height: int = 480
     target_markers: bool = True
@@ -87,7 +88,8 @@ def run_dance(
     save_dance(paths["dance"], dance)
 
     status("dancing (simulation)")
-    result = rollout(dance, policy, randomize=job.randomize, seed=job.seed, progress=sim_progress)
+    sim_seed = job.seed if job.sim_seed is None else job.sim_seed
+    result = rollout(dance, policy, randomize=job.randomize, seed=sim_seed, progress=sim_progress)
     timings["simulation_s"] = result.sim_wall_s
 
     render_s = None
