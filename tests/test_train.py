@@ -249,3 +249,47 @@ def test_cli_resume_without_checkpoint_is_one_line_and_exit_2(tmp_path, monkeypa
     assert err[-1].startswith("quaddance: error:")
     assert str(run_dir / "checkpoint.pt") in err[-1]
     assert not any("Traceback" in line for line in err)
+
+
+def test_sigterm_stops_training_with_a_checkpoint_of_the_last_iteration(tmp_path):
+    """`kill` (as a job scheduler does) loses no finished iteration."""
+    import csv
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    run = tmp_path / "run"
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "quaddance.cli",
+            "train",
+            "--run-dir",
+            str(run),
+            "--num-envs",
+            "8",
+            "--bank-size",
+            "2",
+            "--iterations",
+            "100000",
+            "--no-progress",
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    curve = run / "curve.csv"
+    deadline = time.monotonic() + 240
+    while time.monotonic() < deadline and (
+        not curve.exists() or len(curve.read_text().splitlines()) < 3
+    ):
+        time.sleep(0.5)
+    proc.send_signal(signal.SIGTERM)
+    proc.wait(timeout=120)
+    state = torch.load(run / "checkpoint.pt", weights_only=True)
+    with curve.open() as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) >= 2
+    assert state["iteration"] == int(rows[-1]["iteration"])

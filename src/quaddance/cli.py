@@ -552,6 +552,10 @@ def main() -> None:
     except QuaddanceError as err:
         print(f"quaddance: error: {err}", file=sys.stderr)
         sys.exit(2)
+    except KeyboardInterrupt:
+        # Training has written its checkpoint by now (train.py), so this is a clean stop.
+        print("quaddance: interrupted", file=sys.stderr)
+        sys.exit(130)
 
 
 if __name__ == "__main__":

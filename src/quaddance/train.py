@@ -14,6 +14,8 @@ import dataclasses
 import io
 import json
 import math
+import signal
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -225,6 +227,7 @@ class Trainer:
 
         writer = SummaryWriter(log_dir=str(self.cfg.run_dir / "tb"), purge_step=self.iteration)
         curve_path = self.cfg.run_dir / "curve.csv"
+        restore_sigterm = _sigterm_as_interrupt()
         rows: list[dict] = []
         obs = self.env.get_observations().to(self.device)
         self.alg.train_mode()
@@ -284,8 +287,9 @@ class Trainer:
         finally:
             if bar:
                 bar.stop()
-            self.save()
+            self.save()  # also on Ctrl-C or `kill`: the run resumes from here
             writer.close()
+            restore_sigterm()
         return rows
 
     def _curve_row(self, sums, steps, ep_reward, losses, collect_s, learn_s) -> dict:
@@ -393,6 +397,19 @@ def policy_metadata(env, cfg: TrainCfg, trainer: Trainer | None = None) -> dict:
             "seed": cfg.seed,
         },
     }
+
+
+def _sigterm_as_interrupt():
+    """Make SIGTERM raise KeyboardInterrupt (so the final checkpoint is written); returns a
+    function that restores the previous handler."""
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    return lambda: signal.signal(signal.SIGTERM, previous)
 
 
 def _append_csv(path: Path, row: dict) -> None:
