@@ -171,3 +171,23 @@ def test_eval_reports_each_item_and_the_mean(short_song, tmp_path):
     assert len(rows) == 2
     assert "short.wav" in text and "second.wav" in text and "**mean**" in text
     assert report.with_suffix(".png").exists()
+
+
+def test_shipped_feedforward_table_is_the_one_the_task_computes():
+    """Playback uses the table from the policy's JSON; training computes it: they agree."""
+    from quaddance.sim.feedforward import lift_table
+
+    meta = json.loads(shipped_policy_path().with_suffix(".json").read_text())
+    shipped = np.asarray(meta["front_feedforward"]["thigh_calf_offsets_rad"])
+    np.testing.assert_allclose(shipped, lift_table(), atol=1e-6)
+
+
+def test_policy_json_without_its_feedforward_table_is_refused(tmp_path):
+    src = shipped_policy_path()
+    onnx = tmp_path / "p.onnx"
+    onnx.write_bytes(src.read_bytes())
+    meta = json.loads(src.with_suffix(".json").read_text())
+    del meta["front_feedforward"]
+    onnx.with_suffix(".json").write_text(json.dumps(meta))
+    with pytest.raises(InputFileError, match="front_feedforward"):
+        OnnxPolicy.load(onnx)

@@ -11,6 +11,7 @@ import numpy as np
 
 from quaddance.errors import InputFileError
 from quaddance.sim.config import DanceTaskCfg, DomainRandCfg, ObsCfg, RewardCfg
+from quaddance.sim.feedforward import LUT_HEIGHTS_M
 from quaddance.sim.scene import SceneCfg
 
 
@@ -53,6 +54,12 @@ class OnnxPolicy:
             obs_dim = int(meta["obs"]["dim"])
         except (json.JSONDecodeError, KeyError, TypeError, ValueError) as err:
             raise InputFileError(json_path, f"not a quaddance policy description ({err})") from err
+        if task.front_feedforward:
+            table = (meta.get("front_feedforward") or {}).get("thigh_calf_offsets_rad", [])
+            if np.asarray(table, dtype=float).shape != (LUT_HEIGHTS_M.size, 2):
+                raise InputFileError(
+                    json_path, "front_feedforward.thigh_calf_offsets_rad is missing or malformed"
+                )
         import onnxruntime as ort
 
         opts = ort.SessionOptions()

@@ -48,6 +48,7 @@ def rollout(
     cfg.domain_rand.enabled = randomize
     n_steps = dance.targets_m.shape[0]
     cfg.episode_length_s = (n_steps + 1) / cfg.policy_hz  # no time-out inside the song
+    ff = policy.meta.get("front_feedforward") or {}
     env = DanceEnv(
         cfg,
         dance.targets_m[None],
@@ -55,6 +56,7 @@ def rollout(
         seed=seed,
         random_start=False,
         compute_rewards=False,
+        feedforward_table=ff.get("thigh_calf_offsets_rad"),
     )
     if env.obs_layout["actor_dim"] != policy.obs_dim:
         raise QuaddanceError(

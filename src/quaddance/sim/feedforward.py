@@ -64,8 +64,15 @@ def lift_table(scene: SceneCfg = SceneCfg()) -> np.ndarray:
 class FrontLiftFeedforward:
     """Batched map (N, 2) front targets (m) -> (N, 12) joint offsets (rad), model order."""
 
-    def __init__(self, scene: SceneCfg, device: torch.device) -> None:
-        self.table = torch.as_tensor(lift_table(scene), dtype=torch.float32, device=device)
+    def __init__(
+        self, scene: SceneCfg, device: torch.device, table: np.ndarray | None = None
+    ) -> None:
+        table = lift_table(scene) if table is None else np.asarray(table, dtype=np.float64)
+        if table.shape != (LUT_HEIGHTS_M.size, 2):
+            raise ValueError(
+                f"feed-forward table must be {(LUT_HEIGHTS_M.size, 2)}, got {table.shape}"
+            )
+        self.table = torch.as_tensor(table, dtype=torch.float32, device=device)
         self.h_max = float(LUT_HEIGHTS_M[-1])
         self.dh = float(LUT_HEIGHTS_M[1] - LUT_HEIGHTS_M[0])
         legs = {leg: i for i, leg in enumerate(go1.MODEL_LEGS)}

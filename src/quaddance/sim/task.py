@@ -49,6 +49,7 @@ class DanceEnv(VecEnv):
         seed: int = 0,
         random_start: bool = True,
         compute_rewards: bool = True,
+        feedforward_table: np.ndarray | None = None,
     ) -> None:
         self.cfg = cfg
         # Playback needs the same observations, dynamics and terminations but no rewards.
@@ -78,7 +79,12 @@ class DanceEnv(VecEnv):
         scale = torch.full((go1.NUM_JOINTS,), cfg.action_scale, device=dev)
         scale[0::3] *= cfg.hip_scale_factor  # hips are every third joint in model order
         self.action_scale = scale
-        self.feedforward = FrontLiftFeedforward(cfg.scene, dev) if cfg.front_feedforward else None
+        # Playback passes the table from the policy's JSON (the same numbers, no 2 s rebuild).
+        self.feedforward = (
+            FrontLiftFeedforward(cfg.scene, dev, feedforward_table)
+            if cfg.front_feedforward
+            else None
+        )
         lo = torch.tensor(model.jnt_range[1:, 0], dtype=torch.float32, device=dev)
         hi = torch.tensor(model.jnt_range[1:, 1], dtype=torch.float32, device=dev)
         mid, half = (lo + hi) / 2, (hi - lo) / 2 * 0.9
