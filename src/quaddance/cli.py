@@ -491,6 +491,22 @@ def bench_dance_cmd(
                 "realtime_factor_render": r.metrics["realtime_factor_render"],
                 "total_over_song": r.timings_s["total_s"] / r.metrics["duration_s"],
             }
+        # The whole command as a user runs it: a fresh process, imports and all.
+        import subprocess
+        import time
+
+        start = time.perf_counter()
+        cmd = [sys.executable, "-m", "quaddance.cli", "dance", "--demo", "--out", tmp + "/cli"]
+        if policy is not None:
+            cmd += ["--policy", str(policy)]
+        subprocess.run(cmd, check=True, capture_output=True)
+        wall_s = time.perf_counter() - start
+        song_s = results["with_video"]["song_s"]
+        results["cli_with_video"] = {
+            "song_s": song_s,
+            "wall_s": wall_s,
+            "wall_over_song": wall_s / song_s,
+        }
     write_json(out, results)
     print(results)
     print(f"-> {out}")

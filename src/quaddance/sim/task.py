@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import numpy as np
 import torch
-from rsl_rl.env import VecEnv
-from tensordict import TensorDict
 
 from quaddance.sim import go1, observations, rewards, terminations
 from quaddance.sim.config import DanceTaskCfg
@@ -38,8 +36,13 @@ def sample_dynamics(cfg: DanceTaskCfg, rng: np.random.Generator) -> np.ndarray:
     return rows
 
 
-class DanceEnv(VecEnv):
-    """Vectorised dance task. `bank` (B, L, 4) holds target sequences at the policy rate."""
+class DanceEnv:
+    """Vectorised dance task. `bank` (B, L, 4) holds target sequences at the policy rate.
+
+    Implements rsl-rl's `VecEnv` interface by duck typing: importing it (with tensordict,
+    which imports torch._dynamo) would cost playback 2 s. With `compute_rewards=False`
+    (playback) observations come as a plain dict of tensors instead of a TensorDict.
+    """
 
     def __init__(
         self,
@@ -115,7 +118,9 @@ class DanceEnv(VecEnv):
         return self.bank[self.bank_idx, t]
 
     # --- VecEnv interface ----------------------------------------------------------------------
-    def get_observations(self) -> TensorDict:
+    def get_observations(self):
+        """Observation groups "actor" and "critic": a TensorDict when training (rsl-rl),
+        a dict of (N, k) tensors in playback."""
         prop = observations.proprio(self)
         self._last_proprio = prop  # the next step's history frame
         actor = torch.cat(
@@ -132,9 +137,13 @@ class DanceEnv(VecEnv):
             groups["critic"] = torch.cat([actor, observations.privileged(self)], dim=1)
         else:
             groups["critic"] = actor
+        if not self.compute_rewards:
+            return groups
+        from tensordict import TensorDict
+
         return TensorDict(groups, batch_size=[self.num_envs], device=self.device)
 
-    def step(self, actions: torch.Tensor) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
+    def step(self, actions: torch.Tensor) -> tuple[dict, torch.Tensor, torch.Tensor, dict]:
         cfg = self.cfg
         actions = actions.to(self.device).clamp(-10.0, 10.0)
         # History of what the policy saw, before the state changes.
