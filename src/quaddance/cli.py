@@ -219,8 +219,8 @@ def train_cmd(
         from quaddance.train import build_bank
 
         run_dir.mkdir(parents=True, exist_ok=True)
-        build_bank(cfg)
-    trainer = train(cfg, log=console.print, progress=progress)
+        bank = build_bank(cfg)
+    trainer = train(cfg, log=console.print, progress=progress, bank=bank)
     console.print(
         f"done: {trainer.iteration} iterations, {trainer.env_steps:,} env steps, "
         f"{trainer.wall_s / 60:.1f} min; policy -> {run_dir / 'policy.onnx'}"

@@ -437,9 +437,12 @@ def _progress_bar(enabled: bool):
     )
 
 
-def train(cfg: TrainCfg, progress: bool = True, log=print) -> Trainer:
-    """Train (or continue) and export; returns the trainer."""
-    trainer = Trainer(cfg, log=log)
+def train(
+    cfg: TrainCfg, progress: bool = True, log=print, bank: np.ndarray | None = None
+) -> Trainer:
+    """Train (or continue) and export; returns the trainer. `bank`: a target bank already
+    built (None: `build_bank`)."""
+    trainer = Trainer(cfg, bank=bank, log=log)
     todo = cfg.iterations - trainer.iteration if cfg.resume else cfg.iterations
     if todo > 0:
         trainer.learn(todo, progress=progress)
