@@ -112,20 +112,48 @@ def test_benign_numpy_pickles_load_at_every_protocol(tmp_path, protocol):
         "big_endian": np.arange(4, dtype=">f8"),
         "fortran": np.asfortranarray(np.arange(6.0).reshape(2, 3)),
         "scaling": np.float64(93.5),
-        "names": np.array(["ab", "c"]),
-        "objects": np.array([1, "x", (2, 3)], dtype=object),
-        "containers": [(1, 2), {3}, frozenset({4}), b"raw", 1 + 2j, None, True],
+        "frames": np.int64(120),
+        "mask": np.array([[True, False]]),
+        "counts": np.arange(3, dtype=np.uint16),
+        "containers": [(1, 2), {3}, frozenset({4}), b"raw", bytearray(b"ab"), 2.5, None, True],
     }
     path = _write_pickle(tmp_path / "ok.pkl", data, protocol)
     loaded = safe_load_pickle(path)
     trusted = pickle.loads(path.read_bytes())  # our own file: plain pickle is the reference
     assert loaded.keys() == data.keys()
-    for key in ("smpl_poses", "big_endian", "fortran", "names"):
+    for key in ("smpl_poses", "big_endian", "fortran", "mask", "counts"):
         np.testing.assert_array_equal(loaded[key], data[key])
-        assert loaded[key].dtype == trusted[key].dtype
+        np.testing.assert_array_equal(loaded[key], trusted[key])
+        # Rebuilt from the type string, in native byte order (numpy's own loader is not
+        # consistent about byte order across protocols).
+        assert loaded[key].dtype == data[key].dtype.newbyteorder("=")
+        assert loaded[key].flags.writeable
+    assert loaded["fortran"].flags.f_contiguous
     assert loaded["scaling"] == np.float64(93.5)
-    assert list(loaded["objects"]) == [1, "x", (2, 3)]
+    assert loaded["frames"] == 120 and loaded["frames"].dtype == np.int64
     assert loaded["containers"] == data["containers"]
+
+
+@pytest.mark.parametrize(
+    ("value", "problem"),
+    [
+        (np.array([1, "x", (2, 3)], dtype=object), "not a real number"),
+        (np.array(["ab", "c"]), "not a real number"),
+        (np.arange(3) + 1j, "not a real number"),
+        (np.complex128(1 + 2j), "not a real number"),
+        (1 + 2j, "complex"),
+        (np.zeros(2, dtype=[("a", "f8")]), "not a real number"),
+        (np.array(["2020-01-01"], dtype="datetime64[D]"), "not a real number"),
+    ],
+    ids=["object", "text", "complex", "complex_scalar", "complex_number", "struct", "date"],
+)
+def test_non_real_arrays_are_refused(tmp_path, value, problem):
+    # Issue 12: complex, object and other non-real dtypes are refused, at every protocol.
+    for protocol in (0, 2, 5):
+        path = _write_pickle(tmp_path / f"v{protocol}.pkl", {"full_pose": value}, protocol)
+        with pytest.raises(InputFileError, match=problem) as err:
+            safe_load_pickle(path)
+        assert path.name in str(err.value)
 
 
 def test_numpy1_spelling_of_array_pickles_loads(tmp_path):
