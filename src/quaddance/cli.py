@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 import sys
 from pathlib import Path
 from typing import Annotated
@@ -23,6 +24,28 @@ app.add_typer(bench_app, name="bench")
 
 SongArg = Annotated[Path, typer.Argument(help="Audio file: wav, flac, ogg or mp3.")]
 
+# --- argument checks: a bad value is a usage error (exit 2) naming the option ----------------
+
+SEED_MAX = 2**32 - 1
+"""Largest seed accepted (numpy's and torch's generators take 0 ... 2**32 - 1 everywhere)."""
+SeedRange = {"min": 0, "max": SEED_MAX}
+
+
+def finite_in(lo: float, hi: float):
+    """Option callback: the value (or each value of a list) is finite and in [lo, hi].
+
+    click's FloatRange lets NaN through (every comparison with NaN is false), hence this.
+    """
+
+    def check(value):
+        for v in value if isinstance(value, list | tuple) else [value]:
+            if v is not None and not (math.isfinite(v) and lo <= v <= hi):
+                raise typer.BadParameter(f"{v} is not a finite number in [{lo:g}, {hi:g}]")
+        return value
+
+    return check
+
+
 
 # --- music -----------------------------------------------------------------------------------
 # (commands: analyze, demo-song)
@@ -38,8 +61,10 @@ def analyze_cmd(
     """Find the tempo, beats, downbeats, sections and envelopes of a song; write them as JSON."""
     from rich.console import Console
 
+    from quaddance.fileio import check_output_file
     from quaddance.music.analysis import analyze_file
 
+    check_output_file(out)  # before the work, not after it
     with Console(stderr=True).status(f"Analysing {song.name}..."):
         analysis = analyze_file(song)
     analysis.save_json(out)
@@ -93,13 +118,24 @@ def choreograph_cmd(
             "(released code)."
         ),
     ] = "feasible",
-    h0: Annotated[float, typer.Option(help="paper mode: eq. 4's h0, m (paper: 2).")] = 2.0,
-    scale: Annotated[float, typer.Option(help="minmax mode: scale s (released code).")] = 1.0,
+    h0: Annotated[
+        float,
+        typer.Option(help="paper mode: eq. 4's h0, m (paper: 2).", callback=finite_in(0.001, 10)),
+    ] = 2.0,
+    scale: Annotated[
+        float,
+        typer.Option(help="minmax mode: scale s (released code).", callback=finite_in(0.001, 10)),
+    ] = 1.0,
     max_height: Annotated[
         float | None,
-        typer.Option(help="feasible mode: highest front-foot target, m (default 0.30, measured)."),
+        typer.Option(
+            help="feasible mode: highest front-foot target, m (default 0.30, measured).",
+            callback=finite_in(0.01, 1.0),
+        ),
     ] = None,
-    seed: Annotated[int, typer.Option(help="Choreographer seed: another seed, another dance.")] = 0,
+    seed: Annotated[
+        int, typer.Option(help="Choreographer seed: another seed, another dance.", **SeedRange)
+    ] = 0,
     style: Annotated[
         str, typer.Option(help="Choreographer style: mixed, calm, energetic or footwork.")
     ] = "mixed",
@@ -111,6 +147,7 @@ def choreograph_cmd(
 
     from quaddance.dancefile import save_dance
     from quaddance.errors import InputFileError
+    from quaddance.fileio import check_output_file
     from quaddance.pipeline import make_dance
     from quaddance.targets import MODES, TargetConfig
 
@@ -121,6 +158,7 @@ def choreograph_cmd(
     for path in (song, motion):
         if path is not None and not path.is_file():
             raise InputFileError(path, "no such file")
+    check_output_file(out)  # before the work, not after it
     cfg = TargetConfig(mode=mode, h0_m=h0, scale=scale)
     if max_height is not None:
         cfg = dataclasses.replace(cfg, max_height_m=max_height)
@@ -158,10 +196,11 @@ def train_cmd(
         str, typer.Option(help="Physics: cpu (native MuJoCo) or gpu (MuJoCo Warp).")
     ] = "cpu",
     num_envs: Annotated[
-        int | None, typer.Option(help="Parallel envs (default: the preset's).")
+        int | None, typer.Option(help="Parallel envs (default: the preset's).", min=1, max=2**20)
     ] = None,
     iterations: Annotated[
-        int, typer.Option(help="PPO iterations in total (with --resume: up to).")
+        int,
+        typer.Option(help="PPO iterations in total (with --resume: up to).", min=1, max=10**8),
     ] = 1000,
     run_dir: Annotated[
         Path, typer.Option(help="Checkpoints, logs, curve and the exported policy.")
@@ -174,22 +213,42 @@ def train_cmd(
         str, typer.Option(help="cpu (small nets, fast on 2 cores) or paper (512-256-128, GPUs).")
     ] = "cpu",
     seed: Annotated[
-        int, typer.Option(help="Seed of the target bank, the envs and the networks.")
+        int, typer.Option(help="Seed of the target bank, the envs and the networks.", **SeedRange)
     ] = 1,
-    bank_size: Annotated[int, typer.Option(help="Target sequences in the bank.")] = 256,
+    bank_size: Annotated[
+        int, typer.Option(help="Target sequences in the bank.", min=1, max=100_000)
+    ] = 256,
     max_height: Annotated[
-        float | None, typer.Option(help="Highest front-foot target in the bank, m.")
+        float | None,
+        typer.Option(
+            help="Highest front-foot target in the bank, m.", callback=finite_in(0.01, 1.0)
+        ),
     ] = None,
-    checkpoint_every: Annotated[float, typer.Option(help="Seconds between checkpoints.")] = 120.0,
+    checkpoint_every: Annotated[
+        float,
+        typer.Option(help="Seconds between checkpoints.", callback=finite_in(1.0, 86_400.0)),
+    ] = 120.0,
     minutes: Annotated[
-        float | None, typer.Option(help="Stop (checkpoint and export) after this many minutes.")
+        float | None,
+        typer.Option(
+            help="Stop (checkpoint and export) after this many minutes.",
+            callback=finite_in(0.0, 525_600.0),
+        ),
     ] = None,
     progress: Annotated[bool, typer.Option(help="Show a progress bar.")] = True,
+    feedforward: Annotated[
+        bool,
+        typer.Option(
+            "--feedforward/--no-feedforward",
+            help="Front-lift feed-forward (sim/feedforward.py); off: the policy alone lifts "
+            "the feet (the ablation where PPO stands still).",
+        ),
+    ] = True,
 ) -> None:
     """Train the dance policy with PPO; exports RUN_DIR/policy.onnx and policy.json."""
     from rich.console import Console
 
-    from quaddance.sim.config import RewardCfg
+    from quaddance.sim.config import DanceTaskCfg, RewardCfg
     from quaddance.train import PRESETS, TrainCfg, train
 
     if engine not in ("cpu", "gpu"):
@@ -214,11 +273,13 @@ def train_cmd(
         max_height_m=max_height,
         checkpoint_every_s=checkpoint_every,
         max_minutes=minutes,
+        task=DanceTaskCfg(front_feedforward=feedforward),
     )
     with console.status("Building the target bank (first run only) and the envs..."):
+        from quaddance.fileio import ensure_dir
         from quaddance.train import build_bank
 
-        run_dir.mkdir(parents=True, exist_ok=True)
+        ensure_dir(run_dir)
         bank = build_bank(cfg)
     trainer = train(cfg, log=console.print, progress=progress, bank=bank)
     console.print(
@@ -243,7 +304,7 @@ def dance_cmd(
         Path | None, typer.Option(help="Policy .onnx (its .json beside it); default: shipped.")
     ] = None,
     mode: Annotated[str, typer.Option(help="Targets: feasible, paper or minmax.")] = "feasible",
-    seed: Annotated[int, typer.Option(help="Choreographer seed.")] = 0,
+    seed: Annotated[int, typer.Option(help="Choreographer seed.", **SeedRange)] = 0,
     out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")] = Path("dance_out"),
     no_video: Annotated[bool, typer.Option("--no-video", help="Skip the video.")] = False,
     randomize: Annotated[
@@ -263,10 +324,10 @@ def dance_cmd(
     if demo:
         if song is not None:
             raise typer.BadParameter("give a SONG or --demo, not both")
+        from quaddance.fileio import ensure_dir
         from quaddance.music.synth import write_demo_song
 
-        out.mkdir(parents=True, exist_ok=True)
-        song = out / "demo_song.wav"
+        song = ensure_dir(out) / "demo_song.wav"
         write_demo_song(song)
     if song is None and motion is None:
         raise typer.BadParameter("give a SONG, --demo, or --motion FILE")
@@ -325,37 +386,74 @@ def eval_cmd(
     ] = None,
     held_out: Annotated[
         Path | None,
-        typer.Option(help="Write the held-out set (8 songs, 2 motions) here and evaluate it."),
+        typer.Option(help="Write held-out set --set into this folder and evaluate it."),
     ] = None,
-    seed: Annotated[int, typer.Option(help="Choreographer seed.")] = 0,
+    held_out_set: Annotated[
+        str,
+        typer.Option(
+            "--set",
+            help="Held-out set for --held-out: generator (8 code-made songs through the "
+            "built-in choreographer + 2 SMPL stepping motions: the training generator) or "
+            "other (8 motions made another way: holds, 200 BPM alternation, near-maximum "
+            "knee lifts, jumps, 60-180 BPM, BVH files of 5 other skeletons, EDGE/AIST++).",
+        ),
+    ] = "generator",
+    seed: Annotated[
+        int,
+        typer.Option(
+            help="Choreographer seed; item i's randomised dynamics use 1000*SEED+i.",
+            min=0,
+            max=SEED_MAX // 1000 - 1000,
+        ),
+    ] = 0,
     randomize: Annotated[
-        bool, typer.Option(help="Randomise the robot's dynamics as in training (robustness).")
+        bool,
+        typer.Option(
+            help="Randomise the robot's dynamics as in training (friction, mass, strength, "
+            "joint offsets, lag, pushes), a different draw per item."
+        ),
     ] = False,
+    policy_output: Annotated[
+        str,
+        typer.Option(
+            help="policy, or zero: replace the policy's output by zeros, leaving the front-lift "
+            "feed-forward alone (the baseline the policy adds to)."
+        ),
+    ] = "policy",
+    title: Annotated[str | None, typer.Option(help="Heading of the report.")] = None,
 ) -> None:
-    """Run a policy over many songs/motions (no video): metrics per item, mean, plot."""
+    """Run a policy over many songs/motions (no video): REPORT (markdown table + mean),
+    REPORT's .json (every item's metrics.json + the mean) and .png (plot)."""
     from rich.console import Console
     from rich.progress import Progress
 
-    from quaddance.play.evaluate import collect_items, evaluate, summarize, write_held_out_set
+    from quaddance.bench.heldout import HELD_OUT_SETS, write_held_out_set
+    from quaddance.play.evaluate import EvalSettings, collect_items, evaluate, summarize
+    from quaddance.play.rollout import POLICY_OUTPUTS
 
+    if held_out_set not in HELD_OUT_SETS:
+        raise typer.BadParameter(f"--set must be one of {', '.join(HELD_OUT_SETS)}")
+    if policy_output not in POLICY_OUTPUTS:
+        raise typer.BadParameter(f"--policy-output must be one of {', '.join(POLICY_OUTPUTS)}")
     paths = list(items or [])
     if held_out is not None:
-        paths += write_held_out_set(held_out)
+        paths += write_held_out_set(held_out, held_out_set)
     if not paths:
         raise typer.BadParameter("give songs/motions/folders, or --held-out DIR")
     todo = collect_items(paths)
+    settings = EvalSettings(seed=seed, randomize=randomize, policy_output=policy_output)
     with Progress(console=Console(stderr=True), transient=True) as bar:
         task = bar.add_task("evaluating", total=len(todo))
 
         def step(i: int, n: int, name: str) -> None:
             bar.update(task, completed=i, description=f"evaluating {name}")
 
-        rows = evaluate(todo, policy, report, seed=seed, progress=step, randomize=randomize)
+        rows = evaluate(todo, policy, report, settings, progress=step, title=title)
     s = summarize(rows)
     print(
         f"{s['items']} items, {s['falls']} falls; feasible MAE "
         f"{100 * (s['mae_feasible_m'] or 0):.1f} cm, corr {s['corr_feasible'] or 0:.2f}; rear lift "
-        f"{100 * (s['rear_lift_mean_m'] or 0):.1f} cm mean -> {report}"
+        f"{100 * (s['rear_lift_mean_m'] or 0):.1f} cm mean -> {report} (+ .json, .png)"
     )
 
 
@@ -369,13 +467,25 @@ def bench_beats_cmd(
         Path, typer.Option("--out", "-o", help="Where to write the JSON results.")
     ] = Path("benchmarks/results/beats.json"),
     random: Annotated[
-        int, typer.Option(help="Random MIDI songs to add (a set the analyser was not tuned on).")
+        int, typer.Option(help="Songs in the random MIDI set (not tuned on).", min=0, max=1000)
     ] = 12,
+    sets: Annotated[
+        str, typer.Option(help="Comma-separated sets to score: tuning, random, untuned.")
+    ] = "tuning,random,untuned",
+    madmom_python: Annotated[
+        Path | None,
+        typer.Option(
+            help="A Python interpreter that can import madmom: also score madmom's DBN tracker "
+            "(madmom is not a dependency; install it in a separate environment)."
+        ),
+    ] = None,
 ) -> None:
-    """Beat F-measure of our analyser and of librosa's default on songs with exact beats.
+    """Beat F-measure of our analyser, librosa's default (and madmom's) on songs with exact beats.
 
-    Needs fluidsynth and a General MIDI soundfont (apt-get install fluidsynth
-    fluid-soundfont-gm) to render the MIDI songs.
+    Reports the strict F (+-70 ms) and the F at each tracker's own metrical level (same,
+    double or half tempo), per set: "tuning" (tuned on), "random" and "untuned" (never tuned
+    on). Needs fluidsynth and a General MIDI soundfont (apt-get install fluidsynth
+    fluid-soundfont-gm); renderings are cached under benchmarks/cache/.
     """
     from rich.console import Console
     from rich.table import Table
@@ -383,25 +493,30 @@ def bench_beats_cmd(
     from quaddance.bench.beats import run_beat_bench
 
     console = Console(stderr=True)
+    chosen = tuple(s.strip() for s in sets.split(",") if s.strip())
     with console.status("Scoring beats...") as status:
         results = run_beat_bench(
-            out, n_random=random, progress=lambda name: status.update(f"Scoring {name}...")
+            out,
+            n_random=random,
+            sets=chosen,
+            madmom_python=madmom_python,
+            progress=lambda name: status.update(f"Scoring {name}..."),
         )
-    table = Table(title="beat F-measure (+-70 ms)")
-    for col in ("song", "BPM", "ours", "librosa default"):
+    trackers = ["quaddance", "librosa_default"]
+    if madmom_python is not None:
+        trackers.append("madmom_dbn")
+    table = Table(title="beat F-measure (+-70 ms): strict / at the tracker's metrical level")
+    for col in ("song", "set", "BPM", *trackers):
         table.add_column(col)
     for row in results["songs"]:
-        table.add_row(
-            row["name"],
-            f"{row['true_tempo_bpm']:g}",
-            f"{row['f_quaddance']:.3f}",
-            f"{row['f_librosa_default']:.3f}",
-        )
-    for label, suffix in (("mean, designed set", ""), ("mean, random set", "_random")):
-        ours = results[f"mean_f_quaddance{suffix}"]
-        if ours is not None:
-            theirs = results[f"mean_f_librosa_default{suffix}"]
-            table.add_row(label, "", f"{ours:.3f}", f"{theirs:.3f}")
+        cells = [f"{row[f'f_{t}']:.3f} / {row[f'f_metrical_{t}']:.3f}" for t in trackers]
+        table.add_row(row["name"], row["set"], f"{row['true_tempo_bpm']:g}", *cells)
+    for set_name, mean in results["means"].items():
+        cells = [
+            f"{mean[f'f_{t}']:.3f} / {mean[f'f_metrical_{t}']:.3f}" if f"f_{t}" in mean else "-"
+            for t in trackers
+        ]
+        table.add_row(f"mean ({mean['n_songs']} songs)", set_name, "", *cells)
     Console().print(table)
     print(f"-> {out}")
 
@@ -411,7 +526,9 @@ def bench_choreograph_cmd(
     out: Annotated[
         Path, typer.Option("--out", "-o", help="Where to write the JSON results.")
     ] = Path("benchmarks/results/choreograph.json"),
-    repeats: Annotated[int, typer.Option(help="Runs per timing; the median is kept.")] = 5,
+    repeats: Annotated[
+        int, typer.Option(help="Runs per timing; the median is kept.", min=1, max=1000)
+    ] = 5,
 ) -> None:
     """Seconds to choreograph 3 minutes of music from a beat grid, and to make its targets."""
     from rich.console import Console
@@ -437,12 +554,16 @@ def bench_train_cmd(
     engine: Annotated[str, typer.Option(help="cpu or gpu.")] = "cpu",
     num_envs: Annotated[
         list[int] | None,
-        typer.Option(help="Env counts (default: cpu 64 256 1024, gpu 4096 16384)."),
+        typer.Option(
+            help="Env counts (default: cpu 64 256 1024, gpu 4096 16384).", min=1, max=2**20
+        ),
     ] = None,
     preset: Annotated[
         str | None, typer.Option(help="Training preset (default: cpu / paper).")
     ] = None,
-    iterations: Annotated[int, typer.Option(help="Timed PPO iterations per env count.")] = 3,
+    iterations: Annotated[
+        int, typer.Option(help="Timed PPO iterations per env count.", min=1, max=10_000)
+    ] = 3,
     mjlab: Annotated[bool, typer.Option(help="Also time mjlab's Go1 velocity task.")] = True,
 ) -> None:
     """Env-only and end-to-end PPO env steps/s; writes a JSON file."""
@@ -512,6 +633,48 @@ def bench_dance_cmd(
     print(f"-> {out}")
 
 
+@bench_app.command("envelope")
+def bench_envelope_cmd(
+    items: Annotated[
+        list[Path] | None,
+        typer.Argument(
+            help="Songs/motions (default: 2 songs of the generator held-out set and 2 motions "
+            "of the other set, written into --work)."
+        ),
+    ] = None,
+    out: Annotated[
+        Path, typer.Option("--out", "-o", help="Where to write the JSON results.")
+    ] = Path("benchmarks/results/envelope.json"),
+    report: Annotated[Path, typer.Option(help="Markdown page of the results.")] = Path(
+        "docs/results/envelope.md"
+    ),
+    policy: Annotated[
+        Path | None, typer.Option(help="Policy .onnx (its .json beside it); default: shipped.")
+    ] = None,
+    work: Annotated[Path, typer.Option(help="Folder for the default items.")] = Path(
+        "runs/heldout"
+    ),
+) -> None:
+    """Robustness envelope: falls and tracking at each end of the training randomisation
+    ranges (friction 0.1/3, mass -1/+3 kg, strength 0.9/1.1, lag 30 ms, and the four hard
+    ends at once), and pushes of increasing strength: the first push velocity that makes the
+    robot fall (nominal robot and hard corner)."""
+    from rich.console import Console
+
+    from quaddance.bench.envelope import default_items, run_envelope, write_envelope
+    from quaddance.play.evaluate import collect_items
+
+    console = Console(stderr=True)
+    todo = collect_items(items) if items else default_items(work)
+    result = run_envelope(todo, policy, log=console.print)
+    command = "quaddance bench envelope" + (f" --policy {policy}" if policy else "")
+    write_envelope(result, out, report, command)
+    for name, p in result["pushes"].items():
+        first = p["first_fall_vel_m_s"]
+        print(f"{name}: first fall at push {'none' if first is None else f'{first:.2f} m/s'}")
+    print(f"-> {out}, {report}")
+
+
 @bench_app.command("reach")
 def bench_reach_cmd(
     out: Annotated[Path, typer.Option("--out", "-o", help="JSON results.")] = Path(
@@ -522,10 +685,17 @@ def bench_reach_cmd(
     ] = None,
     heights: Annotated[
         list[float] | None,
-        typer.Option("--height", help="Coarse sweep heights, m (repeat; default 0.05 ... 0.45)."),
+        typer.Option(
+            "--height",
+            help="Coarse sweep heights, m (repeat; default 0.05 ... 0.45).",
+            callback=finite_in(0.0, 1.0),
+        ),
     ] = None,
     tolerance: Annotated[
-        float, typer.Option(help="Bisect the edge of the sweep down to this, m.")
+        float,
+        typer.Option(
+            help="Bisect the edge of the sweep down to this, m.", callback=finite_in(1e-4, 0.1)
+        ),
     ] = 0.005,
 ) -> None:
     """Highest front-foot height the Go1 holds standing on three legs, in our simulator."""
@@ -561,17 +731,60 @@ def bench_reach_cmd(
     print(f"-> {out}")
 
 
+#: Longest error line printed, characters (a message quoting a file must stay one short line).
+MAX_ERROR_CHARS = 400
+#: Exit status after Ctrl-C (SIGINT) or SIGTERM: 128 + the signal number, as a shell reports.
+EXIT_SIGINT, EXIT_SIGTERM = 130, 143
+
+
+def one_line_error(err: BaseException) -> str:
+    """``quaddance: error: <message>`` on one line of at most `MAX_ERROR_CHARS`."""
+    line = "quaddance: error: " + " ".join(str(err).split())
+    return line if len(line) <= MAX_ERROR_CHARS else line[: MAX_ERROR_CHARS - 3] + "..."
+
+
+def _stop_on_signals() -> dict[int, int]:
+    """Turn SIGINT and SIGTERM into KeyboardInterrupt, so that every ``atomic_path`` removes
+    its temporary file and no output is left half-written; returns {signal: exit status} of
+    the first signal received (filled in by the handler). Later signals are ignored while
+    the process cleans up, so a second Ctrl-C cannot cut the cleanup short."""
+    import signal
+
+    received: dict[int, int] = {}
+
+    def interrupt(signum: int, frame: object) -> None:
+        if received:
+            return
+        received[signum] = EXIT_SIGTERM if signum == signal.SIGTERM else EXIT_SIGINT
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, interrupt)
+    return received
+
+
 def main() -> None:
-    """Console entry point: user errors become one line on stderr and exit status 2."""
+    """Console entry point: user errors become one line on stderr and exit status 2; Ctrl-C
+    and SIGTERM one line and exit status 130 / 143 (outputs complete or absent)."""
+    received = _stop_on_signals()
     try:
         app()
     except QuaddanceError as err:
-        print(f"quaddance: error: {err}", file=sys.stderr)
+        print(one_line_error(err), file=sys.stderr)
         sys.exit(2)
     except KeyboardInterrupt:
-        # Training has written its checkpoint by now (train.py), so this is a clean stop.
-        print("quaddance: interrupted", file=sys.stderr)
-        sys.exit(130)
+        _interrupted(received)
+    except SystemExit:
+        # typer turns KeyboardInterrupt into a silent exit 130; say why we stopped.
+        if received:
+            _interrupted(received)
+        raise
+
+
+def _interrupted(received: dict[int, int]) -> None:
+    # Training has written its checkpoint by now (train.py), so this is a clean stop.
+    print("quaddance: interrupted", file=sys.stderr)
+    sys.exit(next(iter(received.values()), EXIT_SIGINT))
 
 
 if __name__ == "__main__":

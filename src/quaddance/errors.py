@@ -19,3 +19,13 @@ class InputFileError(QuaddanceError):
         self.path = Path(path)
         self.problem = problem
         super().__init__(f"{self.path}: {problem}")
+
+
+class OutputFileError(QuaddanceError):
+    """An output path cannot be written (it is a device, a folder where a file goes, the disk
+    is full, ...); the message names the path and the problem."""
+
+    def __init__(self, path: str | Path, problem: str) -> None:
+        self.path = Path(path)
+        self.problem = problem
+        super().__init__(f"{self.path}: {problem}")

@@ -14,7 +14,7 @@ from typing import Any
 
 from quaddance.dancefile import Dance, save_dance
 from quaddance.errors import InputFileError
-from quaddance.fileio import write_json
+from quaddance.fileio import check_output_file, ensure_dir, write_json
 from quaddance.play.policy import OnnxPolicy, shipped_policy_path
 
 
@@ -70,8 +70,9 @@ def run_dance(
             raise InputFileError(path, "no such file")
     policy_path = job.policy or shipped_policy_path()
     policy = OnnxPolicy.load(policy_path)
-    out = job.out_dir
-    out.mkdir(parents=True, exist_ok=True)
+    out = ensure_dir(job.out_dir)
+    for name in ("dance.npz", "feet.png", "metrics.json", "dance.mp4"):
+        check_output_file(out / name)  # refuse a FIFO or device before the work, not after
     timings: dict[str, float] = {}
 
     status("analysing the music and choreographing")

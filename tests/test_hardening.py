@@ -1,0 +1,352 @@
+"""Hostile input (issue 12): audio headers and samples, output paths, signals, arguments.
+
+Each bad input must end as one `QuaddanceError` naming the file (the CLI prints it as one
+line, exit 2) or as a usage error (exit 2); never a traceback, never a write over something
+that is not a regular file.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import soundfile as sf
+import typer
+from typer.testing import CliRunner
+
+from quaddance import fileio
+from quaddance.cli import EXIT_SIGINT, EXIT_SIGTERM, app, one_line_error
+from quaddance.errors import InputFileError, OutputFileError
+from quaddance.music import audio
+from quaddance.music.audio import MAX_SONG_S, load_audio
+
+SR = 22050
+
+
+def _tone(seconds: float, sr: int = SR, peak: float = 0.5) -> np.ndarray:
+    t = np.arange(int(seconds * sr)) / sr
+    return (peak * np.sin(2 * np.pi * 220.0 * t)).astype(np.float32)
+
+
+def _wav_bytes(y: np.ndarray, sr: int = SR, subtype: str = "FLOAT") -> bytearray:
+    import io
+
+    buf = io.BytesIO()
+    sf.write(buf, y, sr, format="WAV", subtype=subtype)
+    return bytearray(buf.getvalue())
+
+
+# --- audio: header numbers ----------------------------------------------------------------------
+
+# Offsets in a canonical WAV header: channels at 22 (u16), sample rate at 24 (u32).
+@pytest.mark.parametrize(
+    ("offset", "fmt", "value"),
+    [(24, "<I", 0), (24, "<I", 1), (24, "<I", 3999), (24, "<I", 4_000_000_000),
+     (22, "<H", 0), (22, "<H", 1000)],
+)  # fmt: skip
+def test_wav_header_numbers_out_of_range_are_refused(tmp_path, offset, fmt, value) -> None:
+    data = _wav_bytes(_tone(3.0), subtype="PCM_16")
+    struct.pack_into(fmt, data, offset, value)
+    path = tmp_path / "bad_header.wav"
+    path.write_bytes(bytes(data))
+    with pytest.raises(InputFileError, match=r"bad_header.wav"):
+        load_audio(path)
+
+
+def test_a_low_but_valid_sample_rate_is_resampled(tmp_path) -> None:
+    path = tmp_path / "phone.wav"
+    sf.write(path, _tone(3.0, sr=8000), 8000)
+    y, sr = load_audio(path)
+    assert sr == SR and abs(y.size - 3 * SR) <= 0.01 * SR
+
+
+def test_too_long_song_is_refused_from_the_header_before_decoding(tmp_path, monkeypatch) -> None:
+    # 8-bit mono at the lowest accepted rate: a 21-minute song in 5 MB.
+    seconds = MAX_SONG_S + 60
+    path = tmp_path / "long.wav"
+    quiet = np.zeros(int(seconds * audio.MIN_FILE_SR_HZ), dtype=np.float32)
+    sf.write(path, quiet, audio.MIN_FILE_SR_HZ, subtype="PCM_U8")
+
+    def no_decoding(path):
+        raise AssertionError("decoding started")
+
+    monkeypatch.setattr(audio, "_soundfile_blocks", no_decoding)
+    with pytest.raises(InputFileError, match=r"long.wav: is too long: 21.0 min .* at most 20 min"):
+        load_audio(path)
+
+
+def test_decoding_stops_at_the_limit_when_the_header_gave_no_length(tmp_path) -> None:
+    consumed = []
+
+    def endless():  # a stream whose header said nothing about its length
+        while True:
+            consumed.append(1)
+            yield np.full((4000, 2), 0.1, dtype=np.float32)
+
+    with pytest.raises(InputFileError, match="too long"):
+        audio._decode(tmp_path / "x.mp3", endless(), 4000, SR, 2.0, max_duration_s=10.0)
+    assert len(consumed) == 11  # 11 one-second blocks pass 10 s
+
+
+@pytest.mark.parametrize(
+    ("value", "words"),
+    [(np.nan, "NaN"), (np.inf, "infinity"), (-np.inf, "infinity"), (1e30, "beyond full scale")],
+)
+def test_bad_float_samples_are_refused(tmp_path, value, words) -> None:
+    y = _tone(3.0)
+    y[SR] = value
+    path = tmp_path / "float.wav"
+    path.write_bytes(bytes(_wav_bytes(y)))
+    with pytest.raises(InputFileError, match=f"float.wav: .*{words}"):
+        load_audio(path)
+
+
+def test_float_master_past_full_scale_is_normalised(tmp_path) -> None:
+    path = tmp_path / "hot.wav"
+    sf.write(path, np.stack([_tone(3.0, peak=4.0), _tone(3.0, peak=2.0)], axis=1), SR,
+             subtype="FLOAT")  # fmt: skip
+    y, _ = load_audio(path)
+    assert np.all(np.isfinite(y))
+    # Divided by the file's peak sample (4): the mono mix, peak 3, ends at 0.75.
+    assert np.max(np.abs(y)) == pytest.approx(0.75, abs=0.03)
+
+
+def test_audioread_fallback_checks_its_header(tmp_path, monkeypatch) -> None:
+    import audioread
+
+    class FakeReader:
+        def __init__(self, samplerate: int) -> None:
+            self.samplerate, self.channels, self.duration = samplerate, 2, 3.0
+
+        def __iter__(self):
+            pcm = (np.tile(_tone(3.0, sr=8000)[:, None], (1, 2)) * 32767).astype("<i2")
+            raw = pcm.tobytes()
+            yield from (raw[i : i + 4001] for i in range(0, len(raw), 4001))  # odd cuts
+
+        def close(self) -> None:
+            pass
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc) -> None:
+            pass
+
+    path = tmp_path / "song.mp3"
+    path.write_bytes(b"not something libsndfile reads" * 10)
+    monkeypatch.setattr(audioread, "audio_open", lambda p: FakeReader(0))
+    with pytest.raises(InputFileError, match=r"song.mp3: sample rate 0 Hz"):
+        load_audio(path)
+    monkeypatch.setattr(audioread, "audio_open", lambda p: FakeReader(8000))
+    y, sr = load_audio(path)
+    assert sr == SR and abs(y.size - 3 * SR) <= 0.01 * SR and 0.45 < np.max(np.abs(y)) < 0.55
+
+
+# --- outputs ------------------------------------------------------------------------------------
+
+
+def _write_through(path: Path, text: str = "new") -> None:
+    with fileio.atomic_path(path) as tmp:
+        tmp.write_text(text)
+
+
+def test_fifo_is_refused_and_left_alone(tmp_path) -> None:
+    fifo = tmp_path / "out.json"
+    os.mkfifo(fifo)
+    with pytest.raises(OutputFileError, match=r"out.json: exists and is a FIFO"):
+        _write_through(fifo)
+    assert fifo.is_fifo()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.json"]  # no temporary left
+
+
+def test_symlink_to_a_device_is_refused(tmp_path) -> None:
+    link = tmp_path / "dance.npz"
+    link.symlink_to("/dev/null")
+    with pytest.raises(OutputFileError, match=r"dance.npz: exists and is a character device"):
+        _write_through(link)
+    assert link.is_symlink() and os.readlink(link) == "/dev/null"
+
+
+def test_socket_and_broken_link_are_refused(tmp_path) -> None:
+    sock_path = tmp_path / "s.json"
+    with socket.socket(socket.AF_UNIX) as sock:
+        sock.bind(str(sock_path))
+        with pytest.raises(OutputFileError, match="a socket"):
+            _write_through(sock_path)
+    broken = tmp_path / "b.json"
+    broken.symlink_to(tmp_path / "absent" / "x.json")
+    with pytest.raises(OutputFileError, match="broken symbolic link"):
+        _write_through(broken)
+
+
+def test_symlink_to_a_regular_file_is_written_through(tmp_path) -> None:
+    target = tmp_path / "real.json"
+    target.write_text("old")
+    link = tmp_path / "link.json"
+    link.symlink_to(target)
+    _write_through(link, "new")
+    assert link.is_symlink() and target.read_text() == "new"
+
+
+def test_folder_and_file_in_the_wrong_place_are_refused(tmp_path) -> None:
+    (tmp_path / "adir").mkdir()
+    with pytest.raises(OutputFileError, match="adir: exists and is a folder"):
+        _write_through(tmp_path / "adir")
+    (tmp_path / "afile").write_text("x")
+    with pytest.raises(OutputFileError, match="afile: exists and is a file, not a folder"):
+        fileio.ensure_dir(tmp_path / "afile")
+    with pytest.raises(OutputFileError, match="is a file, not a folder"):
+        _write_through(tmp_path / "afile" / "sub" / "x.json")
+    with pytest.raises(OutputFileError, match="is a file, not a folder"):
+        fileio.ensure_dir(tmp_path / "afile" / "sub")
+    assert fileio.ensure_dir(tmp_path / "new" / "sub").is_dir()
+
+
+@pytest.mark.parametrize("error", [OSError(28, "No space left on device"), KeyboardInterrupt()])
+def test_failed_or_interrupted_write_keeps_the_old_file(tmp_path, error) -> None:
+    path = tmp_path / "metrics.json"
+    path.write_text("old")
+    expected = OutputFileError if isinstance(error, OSError) else KeyboardInterrupt
+    with pytest.raises(expected), fileio.atomic_path(path) as tmp:
+        tmp.write_text("half")
+        raise error
+    assert path.read_text() == "old" and [p.name for p in tmp_path.iterdir()] == ["metrics.json"]
+
+
+def test_cli_refuses_output_paths_before_the_work(tmp_path) -> None:
+    runner = CliRunner()
+    song = tmp_path / "song.wav"
+    sf.write(song, _tone(3.0), SR)
+    (tmp_path / "afile").write_text("x")
+    os.mkfifo(tmp_path / "fifo.npz")
+    cases = [
+        (["dance", str(song), "--no-video", "--out", str(tmp_path / "afile")], "afile"),
+        (["choreograph", str(song), "-o", str(tmp_path)], tmp_path.name),
+        (["choreograph", str(song), "-o", str(tmp_path / "fifo.npz")], "fifo.npz"),
+        (["analyze", str(song), "-o", str(tmp_path / "afile" / "a.json")], "afile"),
+    ]
+    for args, name in cases:
+        result = runner.invoke(app, args)
+        assert isinstance(result.exception, OutputFileError), (args, result.output)
+        assert name in str(result.exception)
+    assert (tmp_path / "fifo.npz").is_fifo() and (tmp_path / "afile").read_text() == "x"
+
+
+def test_error_line_is_one_short_line() -> None:
+    line = one_line_error(InputFileError("f.wav", "bad\nvalue " + "x" * 5000))
+    assert "\n" not in line and len(line) <= 400 and line.startswith("quaddance: error: f.wav")
+
+
+# --- Ctrl-C and SIGTERM -------------------------------------------------------------------------
+
+
+def _interrupt(args: list[str], sig: int, delay_s: float, wait_for: str | None = None):
+    """Run ``quaddance ARGS``, send ``sig`` ``delay_s`` after it starts (or after it prints
+    ``wait_for`` on stderr); return (returncode, stderr)."""
+    cmd = [sys.executable, "-c", "from quaddance.cli import main; main()", *args]
+    env = {**os.environ, "COLUMNS": "200"}
+    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, env=env)
+    err = b""
+    if wait_for is not None:
+        while wait_for.encode() not in err:
+            line = proc.stderr.readline()
+            if not line:
+                break
+            err += line
+    time.sleep(delay_s)
+    proc.send_signal(sig)
+    _, rest = proc.communicate(timeout=120)
+    return proc.returncode, (err + rest).decode(errors="replace")
+
+
+def _check_interrupted(returncode: int, stderr: str, sig: int, folder: Path) -> None:
+    expected = EXIT_SIGTERM if sig == signal.SIGTERM else EXIT_SIGINT
+    lines = [line for line in stderr.splitlines() if "interrupted" in line or "rror" in line]
+    if returncode == 0:  # it finished before the signal came: complete outputs
+        assert lines == [], stderr
+    else:
+        assert returncode == expected and lines == ["quaddance: interrupted"], stderr
+    assert "Traceback" not in stderr
+    assert not [p for p in folder.rglob("*") if ".tmp" in p.name], "temporary file left"
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_interrupted_choreograph_leaves_a_complete_dance_or_none(tmp_path, demo_song, sig):
+    from quaddance.dancefile import load_dance
+
+    rng = random.Random(f"choreograph-{sig}")  # a random but repeatable moment
+    out = tmp_path / "dance.npz"
+    code, stderr = _interrupt(
+        ["choreograph", str(demo_song[0]), "-o", str(out)], sig, rng.uniform(1.5, 5.0)
+    )
+    _check_interrupted(code, stderr, sig, tmp_path)
+    if out.exists():
+        load_dance(out)
+
+
+def test_interrupted_dance_leaves_complete_outputs(tmp_path, demo_song) -> None:
+    from quaddance.dancefile import load_dance
+
+    out = tmp_path / "out"
+    args = ["dance", str(demo_song[0]), "--no-video", "--out", str(out)]
+    delay_s = random.Random("dance").uniform(0.0, 1.0)
+    code, stderr = _interrupt(args, signal.SIGTERM, delay_s, wait_for="dancing (simulation)")
+    _check_interrupted(code, stderr, signal.SIGTERM, tmp_path)
+    assert code == EXIT_SIGTERM, "the signal should land during the simulation"
+    load_dance(out / "dance.npz")  # written before the simulation, complete
+    assert not (out / "metrics.json").exists()
+
+
+# --- arguments ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("args", "option"),
+    [
+        (["choreograph", "s.wav", "--seed", "12345678901234567890"], "--seed"),
+        (["choreograph", "s.wav", "--seed", "-1"], "--seed"),
+        (["choreograph", "s.wav", "--h0", "nan"], "--h0"),
+        (["choreograph", "s.wav", "--scale", "inf"], "--scale"),
+        (["choreograph", "s.wav", "--max-height", "0"], "--max-height"),
+        (["dance", "s.wav", "--seed", "99999999999999999999"], "--seed"),
+        (["eval", "s.wav", "--seed", "99999999999"], "--seed"),
+        (["train", "--num-envs", "0"], "--num-envs"),
+        (["train", "--iterations", "0"], "--iterations"),
+        (["train", "--minutes", "nan"], "--minutes"),
+        (["train", "--max-height", "-inf"], "--max-height"),
+        (["train", "--checkpoint-every", "1e400"], "--checkpoint-every"),
+        (["train", "--bank-size", "0"], "--bank-size"),
+        (["bench", "reach", "--height", "nan"], "--height"),
+        (["bench", "reach", "--tolerance", "0"], "--tolerance"),
+        (["bench", "choreograph", "--repeats", "0"], "--repeats"),
+        (["bench", "train", "--num-envs", "-4"], "--num-envs"),
+    ],
+)
+def test_out_of_range_options_are_usage_errors(args, option) -> None:
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 2 and option in result.output, result.output
+    assert result.exception is None or isinstance(result.exception, SystemExit)
+
+
+def _commands(group, prefix: tuple[str, ...] = ()):
+    for name, command in group.commands.items():
+        yield (*prefix, name)
+        if hasattr(command, "commands"):  # a group (typer bundles its own click)
+            yield from _commands(command, (*prefix, name))
+
+
+def test_every_command_has_working_help() -> None:
+    commands = list(_commands(typer.main.get_command(app)))
+    assert {("dance",), ("choreograph",), ("bench", "reach")} <= set(commands)
+    for path in [(), *commands]:
+        result = CliRunner().invoke(app, [*path, "--help"])
+        assert result.exit_code == 0 and "Usage" in result.output, (path, result.output)
