@@ -510,7 +510,7 @@ def _edge_dict(n_frames: int = 60) -> dict[str, np.ndarray]:
                 "smpl_trans": np.zeros((60, 3)),
                 "smpl_scaling": np.zeros(1),
             },
-            "positive",
+            "'smpl_scaling' is 0, expected",
         ),
         ("list.pkl", [1, 2, 3], "expected a dict"),
     ],

@@ -28,6 +28,25 @@ UNITS_M: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001, "inch": 0.0254}
 # FACTS.md section 3); the unit that brings the file's chain closest to this is chosen.
 TYPICAL_LEG_CHAIN_M = 0.9
 
+# Limits on what a BVH file may ask for, checked before the memory they drive is allocated.
+MAX_BVH_BYTES = 256 << 20  # 20 min at 120 fps of a 96-channel skeleton is about 130 MB
+MAX_JOINTS = 512  # mocap skeletons have 20-100 joints; hands and faces a few hundred
+MAX_CHANNELS_PER_JOINT = 6  # three positions and three rotations
+MAX_VALUES = 24_000_000  # frames x channels held at once (192 MB of float64)
+MAX_JOINT_FRAMES = 12_000_000  # frames x joints of world positions (288 MB)
+MAX_ABS_VALUE = 1e7  # any OFFSET or channel value: 10 km in mm, or 27 000 turns in degrees
+MIN_FRAME_TIME_S = 1e-3  # 1000 fps: faster than any motion capture system
+MAX_FRAME_TIME_S = 1.0  # 1 fps: slower cannot carry a dance
+_FK_CHUNK_FRAMES = 4096  # frames per forward-kinematics step, bounds its temporary memory
+_ASCII_INT = re.compile(r"[0-9]{1,9}")
+_ASCII_FLOAT = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]{1,3})?")
+
+
+def _short(text: str, limit: int = 40) -> str:
+    """``text`` quoted and cut to ``limit`` characters, for error messages."""
+    return repr(text if len(text) <= limit else text[:limit] + "...")
+
+
 # Joint names of the ankles after lower-casing and dropping "_", "-", " ", "." and any
 # "namespace:" prefix. Ankle names win over foot names: in SMPL-style files "L_Foot" is the toe
 # while "L_Ankle" is the ankle; elsewhere (CMU, Mixamo) "LeftFoot" is the ankle joint.
@@ -82,10 +101,15 @@ def _parse_hierarchy(tokens: list[str], path: Path) -> list[_Joint]:
         return got
 
     def numbers(count: int, what: str) -> np.ndarray:
-        try:
-            return np.array([float(t) for t in need(count, what)])
-        except ValueError:
-            raise InputFileError(path, f"BVH {what} has a value that is not a number") from None
+        texts = need(count, what)
+        # ASCII decimal only: float() would also take "1_0", "nan" and Arabic-Indic digits.
+        if not all(_ASCII_FLOAT.fullmatch(t) for t in texts):
+            bad = next(t for t in texts if not _ASCII_FLOAT.fullmatch(t))
+            raise InputFileError(path, f"BVH {what} value {_short(bad)} is not a number")
+        values = np.array([float(t) for t in texts])
+        if not np.all(np.abs(values) <= MAX_ABS_VALUE):
+            raise InputFileError(path, f"BVH {what} value beyond +-{MAX_ABS_VALUE:g}")
+        return values
 
     while i < len(tokens):
         word = tokens[i]
@@ -93,7 +117,7 @@ def _parse_hierarchy(tokens: list[str], path: Path) -> list[_Joint]:
         key = word.upper()
         if key in ("ROOT", "JOINT"):
             if (key == "ROOT") != (not stack):
-                raise InputFileError(path, f"BVH {word} in the wrong place (block nesting)")
+                raise InputFileError(path, f"BVH {_short(word)} in the wrong place (block nesting)")
             name_parts = []
             while i < len(tokens) and tokens[i] != "{":
                 name_parts.append(tokens[i])
@@ -102,7 +126,9 @@ def _parse_hierarchy(tokens: list[str], path: Path) -> list[_Joint]:
             parent = stack[-1] if stack else -1
             if parent == -2:
                 raise InputFileError(path, "BVH End Site has a child joint")
-            name = " ".join(name_parts) or f"joint{len(joints)}"
+            if len(joints) >= MAX_JOINTS:
+                raise InputFileError(path, f"BVH hierarchy has more than {MAX_JOINTS} joints")
+            name = " ".join(name_parts)[:100] or f"joint{len(joints)}"
             joints.append(_Joint(name, parent, np.zeros(3), []))
             stack.append(len(joints) - 1)
         elif key == "END":
@@ -118,19 +144,28 @@ def _parse_hierarchy(tokens: list[str], path: Path) -> list[_Joint]:
             if not stack or stack[-1] < 0:
                 raise InputFileError(path, "BVH CHANNELS outside a joint block")
             (count_text,) = need(1, "CHANNELS")
-            if not count_text.isdigit():
-                raise InputFileError(path, f"BVH CHANNELS count {count_text!r} is not a number")
+            # ASCII digits only: str.isdigit() is also true for "²", which int() refuses.
+            if not _ASCII_INT.fullmatch(count_text):
+                raise InputFileError(
+                    path, f"BVH CHANNELS count {_short(count_text)} is not a number"
+                )
+            if int(count_text) > MAX_CHANNELS_PER_JOINT:
+                raise InputFileError(
+                    path,
+                    f"BVH CHANNELS count {int(count_text)} is more than "
+                    f"{MAX_CHANNELS_PER_JOINT} (3 positions, 3 rotations)",
+                )
             for channel in need(int(count_text), "CHANNELS"):
                 match = re.fullmatch(r"([xyz])(position|rotation)", channel.lower())
                 if match is None:
-                    raise InputFileError(path, f"BVH channel {channel!r} is not understood")
+                    raise InputFileError(path, f"BVH channel {_short(channel)} is not understood")
                 joints[stack[-1]].channels.append((match[2], _AXES[match[1]]))
         elif word == "}":
             if not stack:
                 raise InputFileError(path, "BVH hierarchy has an unmatched '}'")
             stack.pop()
         else:
-            raise InputFileError(path, f"BVH hierarchy has an unexpected word {word!r}")
+            raise InputFileError(path, f"BVH hierarchy has an unexpected word {_short(word)}")
     if stack:
         raise InputFileError(path, "BVH hierarchy is truncated (a block is never closed)")
     if not joints:
@@ -155,7 +190,21 @@ def _elementary_rotations(axis: int, angle_rad: np.ndarray) -> np.ndarray:
 
 
 def _forward_kinematics(joints: list[_Joint], values: np.ndarray) -> np.ndarray:
-    """World positions (T, J, 3) from per-frame channel values (T, C)."""
+    """World positions (T, J, 3) from per-frame channel values (T, C).
+
+    Runs over chunks of frames so the world rotations (J 3x3 matrices per frame) never exist
+    for the whole motion at once.
+    """
+    n_frames = values.shape[0]
+    positions = np.empty((n_frames, len(joints), 3))
+    for start in range(0, n_frames, _FK_CHUNK_FRAMES):
+        chunk = slice(start, min(start + _FK_CHUNK_FRAMES, n_frames))
+        positions[chunk] = _forward_kinematics_chunk(joints, values[chunk])
+    return positions
+
+
+def _forward_kinematics_chunk(joints: list[_Joint], values: np.ndarray) -> np.ndarray:
+    """`_forward_kinematics` for frames that fit in memory at once."""
     n_frames = values.shape[0]
     positions = np.empty((n_frames, len(joints), 3))
     world_rot = np.empty((n_frames, len(joints), 3, 3))
@@ -182,13 +231,85 @@ def _forward_kinematics(joints: list[_Joint], values: np.ndarray) -> np.ndarray:
     return positions
 
 
-def load_bvh(path: str | Path) -> BvhMotion:
+def _frame_time_s(path: Path, motion: str) -> float:
+    """The ``Frame Time:`` of the MOTION block, seconds, checked to be a plausible rate."""
+    match = re.search(r"Frame\s+Time:[ \t]*(\S*)", motion)
+    if match is None:
+        raise InputFileError(path, "BVH MOTION block lacks 'Frame Time:'")
+    if not _ASCII_FLOAT.fullmatch(match[1]):
+        raise InputFileError(path, f"BVH Frame Time {_short(match[1])} is not a number")
+    frame_time_s = float(match[1])
+    if not MIN_FRAME_TIME_S <= frame_time_s <= MAX_FRAME_TIME_S:
+        raise InputFileError(
+            path,
+            f"BVH Frame Time {frame_time_s:g} s is out of range: expected "
+            f"{MIN_FRAME_TIME_S:g} to {MAX_FRAME_TIME_S:g} s (1000 to 1 frames per second)",
+        )
+    return frame_time_s
+
+
+def _motion_values(path: Path, data: str, n_frames: int, n_channels: int) -> np.ndarray:
+    """The channel values (T, C) after ``Frame Time:``, parsed line by line into one array."""
+    expected = n_frames * n_channels
+    if expected > MAX_VALUES:
+        raise InputFileError(
+            path,
+            f"BVH motion is too large: {n_frames} frames x {n_channels} channels is more "
+            f"than {MAX_VALUES} values",
+        )
+    if not data.isascii():
+        # float() would read Arabic-Indic and other Unicode digits; BVH numbers are ASCII.
+        raise InputFileError(path, "BVH motion data has non-ASCII characters")
+    flat = np.empty(expected)
+    filled = 0
+    # One frame per line: a line longer than its frame can be is refused before it is split
+    # (a 200 MB line would become millions of strings at once).
+    max_line_chars = 64 * n_channels + 1024
+    start = 0
+    while start < len(data):
+        end = data.find("\n", start)
+        end = len(data) if end < 0 else end
+        if end - start > max_line_chars:
+            raise InputFileError(
+                path, f"BVH motion data has a line longer than {max_line_chars} characters"
+            )
+        tokens = data[start:end].split()
+        start = end + 1
+        if not tokens:
+            continue
+        if filled + len(tokens) > expected:
+            raise InputFileError(
+                path,
+                f"BVH motion data has more values than {n_frames} frames x {n_channels} "
+                f"channels (inconsistent file)",
+            )
+        try:
+            flat[filled : filled + len(tokens)] = np.array(tokens, dtype=np.float64)
+        except ValueError:
+            raise InputFileError(path, "BVH motion data has a value that is not a number") from None
+        filled += len(tokens)
+    if filled != expected:
+        raise InputFileError(
+            path,
+            f"BVH motion data has {filled} values but {n_frames} frames x {n_channels} "
+            f"channels need {expected} (truncated or inconsistent file)",
+        )
+    if not np.all(np.isfinite(flat)):
+        raise InputFileError(path, "BVH motion data contains NaN or infinite values")
+    if not np.all(np.abs(flat) <= MAX_ABS_VALUE):
+        raise InputFileError(path, f"BVH motion data has a value beyond +-{MAX_ABS_VALUE:g}")
+    return flat.reshape(n_frames, n_channels)
+
+
+def load_bvh(path: str | Path, max_duration_s: float = float("inf")) -> BvhMotion:
     """Read a BVH file and compute world joint positions for every frame.
 
     Parameters
     ----------
     path : str or Path
         The ``.bvh`` file.
+    max_duration_s : float
+        Longest motion accepted, seconds; checked from the header before the frames are read.
 
     Returns
     -------
@@ -199,16 +320,23 @@ def load_bvh(path: str | Path) -> BvhMotion:
     Raises
     ------
     InputFileError
-        If the file cannot be read, is not BVH, or its hierarchy or motion block is
-        malformed or truncated.
+        If the file cannot be read, is not BVH, its hierarchy or motion block is malformed or
+        truncated, or it breaks a limit: frame time outside 1 ms - 1 s, longer than
+        ``max_duration_s``, more than `MAX_JOINTS` joints or `MAX_VALUES` values, values
+        beyond `MAX_ABS_VALUE`, numbers that are not ASCII decimals.
     """
     path = Path(path)
     try:
-        raw = path.read_bytes()
+        with path.open("rb") as f:
+            raw = f.read(MAX_BVH_BYTES + 1)
     except OSError as err:
         raise InputFileError(path, f"cannot be read ({err.strerror or err})") from None
+    if len(raw) > MAX_BVH_BYTES:
+        raise InputFileError(path, f"is larger than {MAX_BVH_BYTES >> 20} MB, too big a motion")
     text = raw.decode("utf-8", errors="replace")
+    del raw
     parts = re.split(r"^\s*MOTION\s*$", text, maxsplit=1, flags=re.MULTILINE)
+    del text
     head_tokens = parts[0].split()
     if not head_tokens or head_tokens[0].upper() != "HIERARCHY":
         raise InputFileError(path, "is not a BVH file (it does not start with HIERARCHY)")
@@ -217,34 +345,32 @@ def load_bvh(path: str | Path) -> BvhMotion:
     joints = _parse_hierarchy(head_tokens[1:], path)
 
     motion = parts[1]
-    frames_match = re.search(r"Frames:\s*(\d+)", motion)
-    time_match = re.search(r"Frame\s+Time:\s*(\S+)", motion)
-    if frames_match is None or time_match is None:
-        raise InputFileError(path, "BVH MOTION block lacks 'Frames:' or 'Frame Time:'")
+    frames_match = re.search(r"Frames:[ \t]*(\S*)", motion)
+    if frames_match is None:
+        raise InputFileError(path, "BVH MOTION block lacks 'Frames:'")
+    if not _ASCII_INT.fullmatch(frames_match[1]):
+        raise InputFileError(path, f"BVH Frames: {_short(frames_match[1])} is not a count")
     n_frames = int(frames_match[1])
-    try:
-        frame_time_s = float(time_match[1])
-    except ValueError:
-        raise InputFileError(path, f"BVH Frame Time {time_match[1]!r} is not a number") from None
-    if not np.isfinite(frame_time_s) or frame_time_s <= 0:
-        raise InputFileError(path, f"BVH Frame Time must be positive, got {frame_time_s}")
     if n_frames < 1:
         raise InputFileError(path, "BVH file has no frames")
-    try:
-        flat = np.array(motion[time_match.end() :].split(), dtype=np.float64)
-    except ValueError:
-        raise InputFileError(path, "BVH motion data has a value that is not a number") from None
-    n_channels = sum(len(j.channels) for j in joints)
-    expected = n_frames * n_channels
-    if flat.size != expected:
+    frame_time_s = _frame_time_s(path, motion)
+    if n_frames * frame_time_s > max_duration_s:
         raise InputFileError(
             path,
-            f"BVH motion data has {flat.size} values but {n_frames} frames x {n_channels} "
-            f"channels need {expected} (truncated or inconsistent file)",
+            f"BVH motion is {n_frames} frames x {frame_time_s:g} s = "
+            f"{n_frames * frame_time_s:.0f} s, longer than the {max_duration_s:g} s allowed",
         )
-    if not np.all(np.isfinite(flat)):
-        raise InputFileError(path, "BVH motion data contains NaN or infinite values")
-    positions = _forward_kinematics(joints, flat.reshape(n_frames, n_channels))
+    if n_frames * len(joints) > MAX_JOINT_FRAMES:
+        raise InputFileError(
+            path,
+            f"BVH motion is too large: {n_frames} frames x {len(joints)} joints is more than "
+            f"{MAX_JOINT_FRAMES}",
+        )
+    time_line = re.search(r"Frame\s+Time:[^\n]*", motion)
+    assert time_line is not None  # found by _frame_time_s
+    n_channels = sum(len(j.channels) for j in joints)
+    values = _motion_values(path, motion[time_line.end() :], n_frames, n_channels)
+    positions = _forward_kinematics(joints, values)
     fps = 1.0 / frame_time_s
     # Exporters round the frame time (0.0333333 for 30 fps): snap to a whole rate when close.
     if abs(fps - round(fps)) < 1e-3 * fps:

@@ -26,6 +26,22 @@ from quaddance.choreo import bvh, smpl
 from quaddance.choreo.safe_pickle import safe_load_pickle
 from quaddance.errors import InputFileError
 
+#: Longest motion accepted, seconds (20 minutes: longer than any song a robot dances to).
+#: Longer files are refused from their header or array shapes, before the work they drive.
+MAX_MOTION_S = 20 * 60.0
+#: Most frames accepted (20 minutes at 166 fps); bounds the memory of forward kinematics.
+MAX_MOTION_FRAMES = 200_000
+#: Frame rates accepted, frames per second (motion capture runs at 24-480).
+MIN_FPS_HZ, MAX_FPS_HZ = 1.0, 1000.0
+#: AIST++ ``smpl_scaling`` accepted (the released files hold about 90-100).
+MIN_SCALING, MAX_SCALING = 1e-3, 1e5
+#: Largest joint position or translation, metres: nothing human is 10 km from the origin,
+#: and the bound keeps every product downstream finite.
+MAX_POSITION_M = 1e4
+#: Largest axis-angle component, radians (real poses stay within a few turns).
+MAX_ANGLE_RAD = 1e3
+_MAX_MESSAGE_LIST = 120  # characters of a key or joint list quoted in an error
+
 _PICKLE_SUFFIXES = (".pkl", ".pickle")
 _BVH_SUFFIXES = (".bvh",)
 _AXIS_NAMES = "xyz"
@@ -43,6 +59,7 @@ class MotionImportConfig:
     # low enough to sit on standing frames, high enough to ignore a few glitched frames.
     floor_percentile: float = 2.0
     min_duration_s: float = 1.0  # shorter clips cannot carry a dance (brief of the importer)
+    max_duration_s: float = MAX_MOTION_S  # longer ones are refused before they are computed
 
 
 @dataclass
@@ -111,10 +128,47 @@ def up_axis_of(positions: np.ndarray, root: int, ankles: tuple[int, int]) -> tup
     return axis, float(np.sign(mean[axis]) or 1.0)
 
 
-def _array(path: Path, data: dict[str, Any], key: str, shape: tuple[int | None, ...]) -> np.ndarray:
-    """``data[key]`` as a finite float array of ``shape`` (None matches any length)."""
+def _listing(names: list[str]) -> str:
+    """Names joined for an error message, cut to `_MAX_MESSAGE_LIST` characters."""
+    text = ", ".join(name[:30] for name in names[:20]) or "none"
+    cut = len(names) > 20 or len(text) > _MAX_MESSAGE_LIST
+    return text[:_MAX_MESSAGE_LIST] + (" ..." if cut else "")
+
+
+def _count_numbers(value: object, limit: int) -> int | None:
+    """Numbers in nested lists/tuples (shared parts counted each time), None if any leaf is
+    not an int or float or the count passes ``limit`` (walked without recursion)."""
+    count, stack = 0, [value]
+    while stack:
+        item = stack.pop()
+        if isinstance(item, list | tuple):
+            stack.extend(item)
+        elif isinstance(item, int | float | np.integer | np.floating) and not isinstance(
+            item, bool | np.bool_
+        ):
+            count += 1
+            if count > limit:
+                return None
+        else:
+            return None
+    return count
+
+
+def _array(
+    path: Path, data: dict[str, Any], key: str, shape: tuple[int | None, ...], max_abs: float
+) -> np.ndarray:
+    """``data[key]`` as a float array of ``shape`` (None: any length) with |values| <= max_abs."""
+    value = data[key]
+    limit = MAX_MOTION_FRAMES * 3 * smpl.N_JOINTS
+    if isinstance(value, np.ndarray):
+        if value.dtype.kind not in "iuf":
+            raise InputFileError(path, f"'{key}' is a {value.dtype} array, not real numbers")
+    elif _count_numbers(value, limit) is None:
+        raise InputFileError(
+            path, f"'{key}' is not a numeric array (or has more than {limit} numbers)"
+        )
     try:
-        value = np.asarray(data[key], dtype=np.float64)
+        value = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):
         raise InputFileError(path, f"'{key}' is not a numeric array") from None
     if value.ndim != len(shape) or any(
@@ -126,18 +180,42 @@ def _array(path: Path, data: dict[str, Any], key: str, shape: tuple[int | None, 
         )
     if not np.all(np.isfinite(value)):
         raise InputFileError(path, f"'{key}' contains NaN or infinite values")
+    if value.size and np.max(np.abs(value)) > max_abs:
+        raise InputFileError(
+            path, f"'{key}' has values up to {np.max(np.abs(value)):.3g}, beyond +-{max_abs:g}"
+        )
     return value
 
 
-def _positive_scalar(path: Path, data: dict[str, Any], key: str) -> float:
-    """``data[key]`` as one finite positive number (a scalar or a one-element array)."""
-    try:
-        value = np.asarray(data[key], dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError):
-        raise InputFileError(path, f"'{key}' is not a number") from None
-    if value.size != 1 or not np.isfinite(value[0]) or value[0] <= 0:
-        raise InputFileError(path, f"'{key}' must be one positive number, got {value.tolist()}")
-    return float(value[0])
+def _number(path: Path, data: dict[str, Any], key: str, low: float, high: float) -> float:
+    """``data[key]`` as one real number in ``[low, high]`` (a scalar or a one-element array)."""
+    value = data[key]
+    if isinstance(value, np.ndarray) and value.size == 1 and value.dtype.kind in "iuf":
+        value = value.reshape(-1)[0]
+    if isinstance(value, bool | np.bool_) or not isinstance(
+        value, int | float | np.integer | np.floating
+    ):
+        raise InputFileError(path, f"'{key}' must be one number, got a {type(value).__name__}")
+    number = float(value)  # ints are at most 64 bits (safe_pickle), so this is finite
+    if not low <= number <= high:
+        raise InputFileError(path, f"'{key}' is {number:.6g}, expected {low:g} to {high:g}")
+    return number
+
+
+def _check_length(path: Path, n_frames: int, fps: float, cfg: MotionImportConfig) -> None:
+    """Refuse a motion shorter or longer than the config allows, before it is computed."""
+    if n_frames > MAX_MOTION_FRAMES or n_frames > cfg.max_duration_s * fps:
+        raise InputFileError(
+            path,
+            f"motion is too long: {n_frames} frames at {fps:g} fps = {n_frames / fps:.0f} s; "
+            f"at most {cfg.max_duration_s:g} s and {MAX_MOTION_FRAMES} frames",
+        )
+    if n_frames < cfg.min_duration_s * fps:
+        raise InputFileError(
+            path,
+            f"motion is too short: {n_frames} frames at {fps:g} fps = {n_frames / fps:.2f} s, "
+            f"need at least {cfg.min_duration_s:g} s",
+        )
 
 
 def _motion_from_pickle(path: Path, cfg: MotionImportConfig) -> tuple[float, np.ndarray, str]:
@@ -147,44 +225,50 @@ def _motion_from_pickle(path: Path, cfg: MotionImportConfig) -> tuple[float, np.
         raise InputFileError(
             path, f"pickle holds a {type(data).__name__}, expected a dict of motion arrays"
         )
+
+    def fps_or(default: float) -> float:
+        return _number(path, data, "fps", MIN_FPS_HZ, MAX_FPS_HZ) if "fps" in data else default
+
     if "full_pose" in data:
-        fps = _positive_scalar(path, data, "fps") if "fps" in data else cfg.edge_fps
-        joints = _array(path, data, "full_pose", (None, smpl.N_JOINTS, 3))
+        fps = fps_or(cfg.edge_fps)
+        joints = _array(path, data, "full_pose", (None, smpl.N_JOINTS, 3), MAX_POSITION_M)
+        _check_length(path, joints.shape[0], fps, cfg)
         heights = joints[:, [smpl.LEFT_ANKLE, smpl.RIGHT_ANKLE], cfg.edge_up_axis]
         return fps, heights, f"EDGE full_pose, {_AXIS_NAMES[cfg.edge_up_axis]}-up"
     if "smpl_poses" not in data or "smpl_trans" not in data:
-        keys = ", ".join(sorted(map(str, data))) or "none"
+        keys = _listing(sorted(map(str, data)))
         raise InputFileError(
             path,
             "is not an EDGE or AIST++ motion: expected 'full_pose' (EDGE) or 'smpl_poses' and "
             f"'smpl_trans' (AIST++, EDGE); keys found: {keys}",
         )
-    poses = _array(path, data, "smpl_poses", (None, 3 * smpl.N_JOINTS))
-    trans = _array(path, data, "smpl_trans", (poses.shape[0], 3))
+    aist = "smpl_scaling" in data
+    fps = fps_or(cfg.aist_fps if aist else cfg.edge_fps)
+    poses = _array(path, data, "smpl_poses", (None, 3 * smpl.N_JOINTS), MAX_ANGLE_RAD)
+    _check_length(path, poses.shape[0], fps, cfg)
+    scaling = _number(path, data, "smpl_scaling", MIN_SCALING, MAX_SCALING) if aist else 1.0
+    trans = _array(path, data, "smpl_trans", (poses.shape[0], 3), MAX_POSITION_M * scaling)
+    joints = smpl.smpl_joints(poses, trans / scaling)
     ankles = (smpl.LEFT_ANKLE, smpl.RIGHT_ANKLE)
-    if "smpl_scaling" in data:
-        fps = _positive_scalar(path, data, "fps") if "fps" in data else cfg.aist_fps
-        scaling = _positive_scalar(path, data, "smpl_scaling")
-        joints = smpl.smpl_joints(poses, trans / scaling)
+    if aist:
         heights = joints[:, list(ankles), cfg.aist_up_axis]
         return fps, heights, f"AIST++ SMPL, {_AXIS_NAMES[cfg.aist_up_axis]}-up"
     # EDGE parameters without full_pose: the global orientation decides the up axis.
-    fps = _positive_scalar(path, data, "fps") if "fps" in data else cfg.edge_fps
-    joints = smpl.smpl_joints(poses, trans)
     axis, sign = up_axis_of(joints, smpl.PELVIS, ankles)
     heights = sign * joints[:, list(ankles), axis]
     return fps, heights, f"EDGE SMPL parameters, {_AXIS_NAMES[axis]}-up (detected)"
 
 
-def _motion_from_bvh(path: Path) -> tuple[float, np.ndarray, str]:
+def _motion_from_bvh(path: Path, cfg: MotionImportConfig) -> tuple[float, np.ndarray, str]:
     """(fps, ankle heights (T, 2) in metres with any origin, description) from a BVH file."""
-    motion = bvh.load_bvh(path)
+    motion = bvh.load_bvh(path, max_duration_s=cfg.max_duration_s)
+    _check_length(path, motion.positions.shape[0], motion.fps, cfg)
     ankles = bvh.find_ankles(motion.joint_names)
     if ankles is None:
         raise InputFileError(
             path,
             "BVH has no joints recognisable as left and right ankles (e.g. LeftFoot/RightFoot, "
-            f"L_Ankle/R_Ankle); joints: {', '.join(motion.joint_names)}",
+            f"L_Ankle/R_Ankle); joints: {_listing(list(motion.joint_names))}",
         )
     leg_chain = np.mean([bvh.chain_length(motion.offsets, motion.parents, a) for a in ankles])
     if leg_chain <= 0:
@@ -248,19 +332,15 @@ def load_motion(path: str | Path, cfg: MotionImportConfig | None = None) -> Huma
     if kind == "pickle":
         fps, heights, description = _motion_from_pickle(path, cfg)
     elif kind == "bvh":
-        fps, heights, description = _motion_from_bvh(path)
+        fps, heights, description = _motion_from_bvh(path, cfg)
     else:
         raise InputFileError(
             path,
             f"unknown motion format '{suffix or '(no suffix)'}': expected an EDGE or AIST++ "
             "pickle (.pkl, .pickle) or a BVH file (.bvh)",
         )
-    n_frames = heights.shape[0]
-    if n_frames < cfg.min_duration_s * fps:
-        raise InputFileError(
-            path,
-            f"motion is too short: {n_frames} frames at {fps:g} fps = {n_frames / fps:.2f} s, "
-            f"need at least {cfg.min_duration_s:g} s",
-        )
+    # Bounded inputs give finite heights; this holds the promise for every format at once.
+    if not np.all(np.isfinite(heights)) or np.max(np.abs(heights)) > MAX_POSITION_M:
+        raise InputFileError(path, f"foot heights are not finite or beyond {MAX_POSITION_M:g} m")
     feet_m = feet_above_floor(heights, cfg.floor_percentile)
     return HumanMotion(fps=fps, feet_m=feet_m, source=f"{path.name} ({description}, {fps:g} fps)")

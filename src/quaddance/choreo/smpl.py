@@ -15,6 +15,7 @@ N_JOINTS = 24
 LEFT_ANKLE, RIGHT_ANKLE = 7, 8
 LEFT_TOE, RIGHT_TOE = 10, 11
 PELVIS = 0
+_CHUNK_FRAMES = 4096  # frames per forward-kinematics step, bounds its temporary memory
 
 # Parent of each joint (-1 for the pelvis); every parent comes before its children.
 PARENTS = (-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19, 20, 21)
@@ -100,6 +101,16 @@ def smpl_joints(poses_aa: np.ndarray, trans: np.ndarray) -> np.ndarray:
         raise ValueError(f"poses_aa must have shape (T, 72), got {poses_aa.shape}")
     if trans.shape != (poses_aa.shape[0], 3):
         raise ValueError(f"trans must have shape ({poses_aa.shape[0]}, 3), got {trans.shape}")
+    joints = np.empty((poses_aa.shape[0], N_JOINTS, 3))
+    # In chunks of frames: the rotations take 1.7 kB per frame, several copies of them at once.
+    for start in range(0, poses_aa.shape[0], _CHUNK_FRAMES):
+        chunk = slice(start, start + _CHUNK_FRAMES)
+        joints[chunk] = _joints_chunk(poses_aa[chunk], trans[chunk])
+    return joints
+
+
+def _joints_chunk(poses_aa: np.ndarray, trans: np.ndarray) -> np.ndarray:
+    """`smpl_joints` for frames that fit in memory at once."""
     local = axis_angle_to_matrix(poses_aa.reshape(-1, N_JOINTS, 3))  # (T, 24, 3, 3)
     world_rot = np.empty_like(local)
     joints = np.empty((poses_aa.shape[0], N_JOINTS, 3))
