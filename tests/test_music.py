@@ -16,6 +16,7 @@ from quaddance.bench.beats import (
     INSTALL_HINT,
     TICKS_PER_BEAT,
     beat_f_measure,
+    metrical_level_f_measure,
     render_midi,
     write_midi,
 )
@@ -41,6 +42,29 @@ def test_f_measure_counts_hits_within_70_ms_one_to_one() -> None:
     # Two estimates next to one reference beat: only one of them may count.
     assert beat_f_measure([1.0], [0.98, 1.02]) == pytest.approx(2 * 0.5 * 1.0 / 1.5)
     assert beat_f_measure(ref, []) == 0.0
+
+
+def test_metrical_level_f_picks_the_estimate_s_level_and_phase() -> None:
+    ref = np.arange(40) * 0.5  # 120 BPM
+    # Half tempo on the second, fourth, ... beat: every estimate is a true beat.
+    half_odd = ref[1::2] + 0.02
+    assert beat_f_measure(ref, half_odd) == pytest.approx(2 * 0.5 / 1.5)
+    assert metrical_level_f_measure(ref, half_odd) == pytest.approx(1.0)
+    assert metrical_level_f_measure(ref, ref[0::2]) == pytest.approx(1.0)
+    # Double tempo: the reference gains the midpoints between its beats.
+    double = np.arange(79) * 0.25
+    assert metrical_level_f_measure(ref, double) == pytest.approx(1.0)
+    assert metrical_level_f_measure(ref, ref - 0.03) == pytest.approx(1.0)
+
+
+def test_metrical_level_f_scores_off_beat_tracking_low() -> None:
+    ref = np.arange(40) * 0.5
+    off = ref + 0.25  # the right tempo, on the "and"s
+    assert metrical_level_f_measure(ref, off) == 0.0
+    # Half tempo on the off-beats matches neither phase of the half-tempo reference.
+    assert metrical_level_f_measure(ref, off[0::2]) == 0.0
+    # Three beats per two: only every third estimate is a true beat.
+    assert metrical_level_f_measure(ref, np.arange(27) * 0.75) < 0.5
 
 
 # --- the synthesiser --------------------------------------------------------------------------
