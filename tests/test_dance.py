@@ -40,10 +40,9 @@ def short_song(tmp_path_factory) -> Path:
 
 def test_shipped_policy_loads_and_matches_the_task():
     policy = OnnxPolicy.load(shipped_policy_path())
-    from quaddance.sim.observations import observation_layout
+    from quaddance.sim.observations import ActorObservation, observation_layout
 
-    obs = policy.task.obs
-    layout = observation_layout(obs.history_len, len(obs.preview_s), obs.privileged_critic)
+    layout = observation_layout(ActorObservation(policy.task, 1), policy.task.obs.privileged_critic)
     assert layout["actor_dim"] == policy.obs_dim
     actions = policy.act(np.zeros((1, policy.obs_dim), np.float32))
     assert actions.shape == (1, 12) and np.isfinite(actions).all()
@@ -150,13 +149,17 @@ def test_a_failing_render_keeps_the_previous_video(short_song, tmp_path, monkeyp
     old.write_bytes(b"previous good video")
     import quaddance.play.video as video
 
-    def boom(*args, **kwargs):
-        raise QuaddanceError("renderer failed")
+    encoder_args = video._encoder_args
 
-    monkeypatch.setattr(video, "render_video", boom)
-    with pytest.raises(QuaddanceError):
-        run_dance(DanceJob(out_dir=tmp_path, song=short_song))
+    def broken_encoder(*args, **kwargs):
+        # A real failure of the encoder, after the workers have started rendering.
+        return [a if a != "libx264" else "no_such_codec" for a in encoder_args(*args, **kwargs)]
+
+    monkeypatch.setattr(video, "_encoder_args", broken_encoder)
+    with pytest.raises(QuaddanceError, match="ffmpeg could not write"):
+        run_dance(DanceJob(out_dir=tmp_path, song=short_song, width=160, height=120))
     assert old.read_bytes() == b"previous good video"
+    assert sorted(p.name for p in tmp_path.iterdir() if p.suffix == ".mp4") == ["dance.mp4"]
 
 
 def test_eval_reports_each_item_and_the_mean(short_song, tmp_path):

@@ -15,6 +15,7 @@ from scipy.spatial.transform import Rotation
 from quaddance.sim import go1, rewards, terminations
 from quaddance.sim.config import DanceTaskCfg, RewardCfg
 from quaddance.sim.engines import CpuEngine, apply_dynamics
+from quaddance.sim.kinematics import estimate_foot_height_m, leg_geometry
 from quaddance.sim.scene import SceneCfg, build_model
 from quaddance.sim.state import SensorLayout, quat_rotate_inverse, state_from_arrays
 from quaddance.sim.task import DanceEnv, sample_dynamics
@@ -195,7 +196,11 @@ def test_observation_layout_names_what_the_policy_sees():
     torch.testing.assert_close(a[:, actor["front_targets_now_m"]], now)
     preview = torch.tensor(bank[0, [8, 13, 23], :2].reshape(-1)).repeat(2, 1)
     torch.testing.assert_close(a[:, actor["front_targets_preview_m"]], preview)
-    torch.testing.assert_close(a[:, actor["proprio.foot_height_m"]], env.robot.foot_height_m)
+    # Foot heights are the robot's own kinematic estimate, never the simulator's truth
+    # (tests/test_observations.py compares the two).
+    s = env.robot
+    estimate = estimate_foot_height_m(s.joint_pos, s.projected_gravity_b, leg_geometry())
+    torch.testing.assert_close(a[:, actor["proprio.foot_height_m"]], estimate)
     torch.testing.assert_close(
         a[:, actor["proprio.projected_gravity"]], env.robot.projected_gravity_b
     )

@@ -73,6 +73,13 @@ class DomainRandCfg:
     push_interval_s: float = 8.0
     push_vel_m_s: float = 0.5
     init_joint_noise_rad: float = 0.1
+    # Sensor noise on what the actor measures, uniform +-value per reading: legged_gym's
+    # noise_scales (Rudin et al. 2022), which Walk These Ways uses on a real Go1.
+    sensor_noise: bool = True
+    gravity_noise: float = 0.05  # projected gravity (unit vector) components
+    gyro_noise_rad_s: float = 0.2
+    joint_pos_noise_rad: float = 0.01
+    joint_vel_noise_rad_s: float = 1.5
 
 
 @dataclass

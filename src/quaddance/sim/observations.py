@@ -1,84 +1,198 @@
-"""Observation terms: small functions of the env, each returning (N, k).
+"""Observation terms: the actor sees only what a real Go1 measures or knows.
 
-The policy input is [proprio, proprio history, front targets now, preview]; the critic adds
-privileged terms. `observation_layout` names every slice (written into the policy's JSON).
+The actor's input is built from a `Measurement` (IMU and joint encoders), the dance's targets
+and the policy's previous action, by `ActorObservation`. Training (N envs, batched) and the
+robot runner (one robot) use that same class, so the observation is defined once. Each term
+is one `ObsTerm` entry of `PROPRIO_TERMS` (name, size, sensor source, function); the layout
+written into the policy's JSON is read off the same table. The critic also sees privileged
+simulator quantities (`privileged`), which never reach the actor.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import torch
 
 from quaddance.sim import go1
+from quaddance.sim.config import DanceTaskCfg, DomainRandCfg
+from quaddance.sim.kinematics import estimate_foot_height_m, leg_geometry
+from quaddance.sim.state import RobotState, quat_rotate_inverse
 
 if TYPE_CHECKING:
     from quaddance.sim.task import DanceEnv
 
-PROPRIO_TERMS: tuple[tuple[str, int], ...] = (
-    ("projected_gravity", 3),
-    ("base_ang_vel_b", 3),
-    ("joint_pos_rel", go1.NUM_JOINTS),
-    ("joint_vel", go1.NUM_JOINTS),
-    ("last_action", go1.NUM_JOINTS),
-    ("foot_height_m", 4),
+#: Where an actor term comes from on a real Go1 (the policy JSON's `obs.terms[].source`).
+SOURCES: tuple[str, ...] = (
+    "imu",
+    "joint_encoders",
+    "foot_contact",
+    "kinematics",
+    "dance",
+    "previous_action",
 )
-PROPRIO_DIM = sum(n for _, n in PROPRIO_TERMS)
 
 
-def proprio(env: DanceEnv) -> torch.Tensor:
-    """What the robot measures itself: gravity in the body frame, gyro, joint encoders
-    (with their calibration offset), last action, and the 4 foot heights (paper, sec. 3)."""
-    s = env.robot
-    return torch.cat(
-        [
-            s.projected_gravity_b,
-            s.base_ang_vel_b,
-            s.joint_pos - env.nominal_joint_pos + env.joint_offset,
-            s.joint_vel,
-            env.last_action,
-            s.foot_height_m,
-        ],
-        dim=1,
-    )
+@dataclass
+class Measurement:
+    """What a Go1 measures, N rows (torch): IMU and joint encoders, model joint order."""
+
+    projected_gravity_b: torch.Tensor  # (N, 3) unit gravity direction in the trunk frame
+    gyro_rad_s: torch.Tensor  # (N, 3) trunk angular velocity, trunk frame
+    joint_pos_rad: torch.Tensor  # (N, 12) encoder readings (calibration offset included)
+    joint_vel_rad_s: torch.Tensor  # (N, 12)
+
+    @classmethod
+    def from_imu(
+        cls,
+        quat_wxyz: torch.Tensor,
+        gyro_rad_s: torch.Tensor,
+        joint_pos_rad: torch.Tensor,
+        joint_vel_rad_s: torch.Tensor,
+    ) -> Measurement:
+        """From the IMU's orientation quaternion (N, 4; w, x, y, z) as a Go1 reports it."""
+        down = torch.zeros(quat_wxyz.shape[0], 3, dtype=quat_wxyz.dtype, device=quat_wxyz.device)
+        down[:, 2] = -1.0
+        return cls(quat_rotate_inverse(quat_wxyz, down), gyro_rad_s, joint_pos_rad, joint_vel_rad_s)
+
+    @classmethod
+    def from_state(cls, state: RobotState, joint_offset_rad: torch.Tensor) -> Measurement:
+        """What the simulated robot's sensors read (encoders carry their calibration offset)."""
+        return cls(
+            state.projected_gravity_b,
+            state.base_ang_vel_b,
+            state.joint_pos + joint_offset_rad,
+            state.joint_vel,
+        )
+
+    def with_noise(self, dr: DomainRandCfg, gen: torch.Generator) -> Measurement:
+        """The same readings plus uniform sensor noise (`DomainRandCfg`, training only)."""
+
+        def noisy(x: torch.Tensor, scale: float) -> torch.Tensor:
+            u = torch.rand(x.shape, generator=gen).to(x.device)
+            return x + (2.0 * u - 1.0) * scale
+
+        return Measurement(
+            noisy(self.projected_gravity_b, dr.gravity_noise),
+            noisy(self.gyro_rad_s, dr.gyro_noise_rad_s),
+            noisy(self.joint_pos_rad, dr.joint_pos_noise_rad),
+            noisy(self.joint_vel_rad_s, dr.joint_vel_noise_rad_s),
+        )
 
 
-def front_targets_now(env: DanceEnv) -> torch.Tensor:
-    """(N, 2) current FL, FR target heights, m."""
-    return env.targets_at(0)[:, :2]
+@dataclass(frozen=True)
+class ObsTerm:
+    """One proprioceptive actor term: `fn(measurement, last_action, builder) -> (N, size)`."""
+
+    name: str
+    size: int
+    source: str
+    fn: Callable[[Measurement, torch.Tensor, ActorObservation], torch.Tensor]
 
 
-def front_targets_preview(env: DanceEnv) -> torch.Tensor:
-    """(N, 2 * len(preview_s)) upcoming FL, FR targets (our addition; can be switched off)."""
-    steps = env.preview_steps
-    if not steps:
-        return torch.zeros(env.num_envs, 0, device=env.device)
-    return torch.cat([env.targets_at(k)[:, :2] for k in steps], dim=1)
+def _foot_height(m: Measurement, last_action: torch.Tensor, ob: ActorObservation) -> torch.Tensor:
+    """Leg kinematics from the encoders, turned upright by the IMU (sim/kinematics.py)."""
+    return estimate_foot_height_m(m.joint_pos_rad, m.projected_gravity_b, ob.geom)
+
+
+PROPRIO_TERMS: tuple[ObsTerm, ...] = (
+    ObsTerm("projected_gravity", 3, "imu", lambda m, a, ob: m.projected_gravity_b),
+    ObsTerm("base_ang_vel_b", 3, "imu", lambda m, a, ob: m.gyro_rad_s),
+    ObsTerm(
+        "joint_pos_rel",
+        go1.NUM_JOINTS,
+        "joint_encoders",
+        lambda m, a, ob: m.joint_pos_rad - ob.nominal_joint_pos,
+    ),
+    ObsTerm("joint_vel", go1.NUM_JOINTS, "joint_encoders", lambda m, a, ob: m.joint_vel_rad_s),
+    ObsTerm("last_action", go1.NUM_JOINTS, "previous_action", lambda m, a, ob: a),
+    ObsTerm("foot_height_m", 4, "kinematics", _foot_height),
+)
+PROPRIO_DIM = sum(t.size for t in PROPRIO_TERMS)
+
+
+class ActorObservation:
+    """The actor's input: [proprio now, proprio history, front targets now, preview].
+
+    One object per batch of robots (N envs in training, 1 on the robot); it keeps the
+    history of past proprio frames. Per policy step: `prop = proprio(meas, last_action)`,
+    `obs = build(prop, targets_at)`, act, then `push(prop)`.
+    """
+
+    def __init__(self, cfg: DanceTaskCfg, num_envs: int, device: torch.device | str = "cpu"):
+        self.device = torch.device(device)
+        self.history_len = cfg.obs.history_len
+        self.preview_steps = [round(s * cfg.policy_hz) for s in cfg.obs.preview_s]
+        self.nominal_joint_pos = torch.tensor(go1.nominal_joint_pos(), device=self.device)
+        self.geom = leg_geometry(cfg.scene)
+        self.history = torch.zeros(num_envs, self.history_len, PROPRIO_DIM, device=self.device)
+
+    def proprio(self, meas: Measurement, last_action: torch.Tensor) -> torch.Tensor:
+        """(N, PROPRIO_DIM): the `PROPRIO_TERMS`, in order."""
+        return torch.cat([t.fn(meas, last_action, self) for t in PROPRIO_TERMS], dim=1)
+
+    def build(self, prop: torch.Tensor, targets_at: Callable[[int], torch.Tensor]) -> torch.Tensor:
+        """(N, dim): ``targets_at(k)`` gives the (N, 4) targets k policy steps ahead, m."""
+        parts = [prop, self.history.flatten(1), targets_at(0)[:, :2]]
+        parts += [targets_at(k)[:, :2] for k in self.preview_steps]
+        return torch.cat(parts, dim=1)
+
+    def push(self, prop: torch.Tensor) -> None:
+        """Make ``prop`` (what the policy just saw) the newest history frame."""
+        if self.history_len:
+            self.history = torch.cat([prop.unsqueeze(1), self.history[:, :-1]], dim=1)
+
+    def reset(self, ids: torch.Tensor, prop: torch.Tensor) -> None:
+        """Fill the history of robots ``ids`` with their current frame ``prop`` (N, P)."""
+        if self.history_len:
+            self.history[ids] = prop[ids].unsqueeze(1)
+
+    def layout(self) -> list[dict]:
+        """Actor terms in order: name, size and sensor source (the policy JSON's `obs.terms`)."""
+        terms = [
+            {"name": f"proprio.{t.name}", "size": t.size, "source": t.source} for t in PROPRIO_TERMS
+        ]
+        sources = sorted({t.source for t in PROPRIO_TERMS})
+        terms += [
+            {"name": f"history[{h}].proprio", "size": PROPRIO_DIM, "source": "+".join(sources)}
+            for h in range(1, self.history_len + 1)
+        ]
+        terms.append({"name": "front_targets_now_m", "size": 2, "source": "dance"})
+        if self.preview_steps:
+            terms.append(
+                {
+                    "name": "front_targets_preview_m",
+                    "size": 2 * len(self.preview_steps),
+                    "source": "dance",
+                }
+            )
+        return terms
+
+
+#: Critic-only terms: simulator quantities no robot measures (name, size, function).
+PRIVILEGED_TERMS: tuple[tuple[str, int, Callable[[DanceEnv], torch.Tensor]], ...] = (
+    ("privileged.dynamics", 3, lambda env: env.dynamics),  # friction, added mass, strength
+    ("privileged.base_lin_vel_b", 3, lambda env: env.robot.base_lin_vel_b),
+    ("privileged.base_height_m", 1, lambda env: env.robot.base_pos_w[:, 2:3]),
+)
 
 
 def privileged(env: DanceEnv) -> torch.Tensor:
-    """Critic-only: dynamics of this env's variant, base velocity and height."""
-    s = env.robot
-    return torch.cat([env.dynamics, s.base_lin_vel_b, s.base_pos_w[:, 2:3]], dim=1)
+    """(N, 7) the `PRIVILEGED_TERMS`, in order."""
+    return torch.cat([fn(env) for _, _, fn in PRIVILEGED_TERMS], dim=1)
 
 
-def observation_layout(history_len: int, n_preview: int, privileged_critic: bool) -> dict:
-    """Names and sizes of the actor's and critic's observation slices, in order."""
-    actor = [(f"proprio.{n}", k) for n, k in PROPRIO_TERMS]
-    actor += [(f"history[{h}].proprio", PROPRIO_DIM) for h in range(1, history_len + 1)]
-    actor += [("front_targets_now_m", 2)]
-    if n_preview:
-        actor += [("front_targets_preview_m", 2 * n_preview)]
-    critic = list(actor)
+def observation_layout(actor: ActorObservation, privileged_critic: bool) -> dict:
+    """Names, sizes and sources of the actor's and critic's observation slices, in order."""
+    actor_terms = actor.layout()
+    critic = list(actor_terms)
     if privileged_critic:
-        critic += [
-            ("privileged.dynamics", 3),
-            ("privileged.base_lin_vel_b", 3),
-            ("privileged.base_height_m", 1),
-        ]
+        critic += [{"name": n, "size": k, "source": "privileged"} for n, k, _ in PRIVILEGED_TERMS]
     return {
-        "actor": [{"name": n, "size": k} for n, k in actor],
-        "critic": [{"name": n, "size": k} for n, k in critic],
-        "actor_dim": sum(k for _, k in actor),
-        "critic_dim": sum(k for _, k in critic),
+        "actor": actor_terms,
+        "critic": critic,
+        "actor_dim": sum(t["size"] for t in actor_terms),
+        "critic_dim": sum(t["size"] for t in critic),
     }

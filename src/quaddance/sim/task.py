@@ -53,7 +53,10 @@ class DanceEnv:
         random_start: bool = True,
         compute_rewards: bool = True,
         feedforward_table: np.ndarray | None = None,
+        dynamics: np.ndarray | None = None,
     ) -> None:
+        """``dynamics``: (K, 3) variants (friction, added mass kg, motor strength) to use
+        instead of drawing them; evaluation pins the robot to chosen values this way."""
         self.cfg = cfg
         # Playback needs the same observations, dynamics and terminations but no rewards.
         self.compute_rewards = compute_rewards
@@ -64,7 +67,8 @@ class DanceEnv:
         self._gen = torch.Generator().manual_seed(seed)
         if abs(cfg.scene.timestep_s * cfg.decimation - cfg.step_dt_s) > 1e-9:
             raise ValueError("scene.timestep_s * decimation must equal 1 / policy_hz")
-        self.engine = make_engine(engine, cfg.num_envs, cfg.scene, sample_dynamics(cfg, self._rng))
+        variants = sample_dynamics(cfg, self._rng) if dynamics is None else np.asarray(dynamics)
+        self.engine = make_engine(engine, cfg.num_envs, cfg.scene, variants)
         self.device = self.engine.device
         dev = self.device
         self._variants = torch.as_tensor(self.engine.variants, dtype=torch.float32, device=dev)
@@ -74,7 +78,9 @@ class DanceEnv:
             raise ValueError(f"target bank must be (B, L, 4), got {tuple(bank_t.shape)}")
         self.bank = bank_t.to(dev)
         self.random_start = random_start
-        self.preview_steps = [round(s * cfg.policy_hz) for s in cfg.obs.preview_s]
+        # The actor's observation: the same builder as the robot runner's (deploy/).
+        self.actor_obs = observations.ActorObservation(cfg, cfg.num_envs, dev)
+        self.preview_steps = self.actor_obs.preview_steps
 
         model = self.engine.model
         self.nominal_joint_pos = torch.tensor(go1.nominal_joint_pos(), device=dev)
@@ -104,7 +110,6 @@ class DanceEnv:
         self.action_lag = torch.zeros(n, dtype=torch.long, device=dev)
         self.joint_offset = z(n, j)
         self.dynamics = self._variants[torch.zeros(n, dtype=torch.long, device=dev)]
-        self.history = z(n, cfg.obs.history_len, observations.PROPRIO_DIM)
         self._last_proprio: torch.Tensor | None = None
         self.robot: RobotState = self._read_state()
         self.reset_all()
@@ -121,17 +126,9 @@ class DanceEnv:
     def get_observations(self):
         """Observation groups "actor" and "critic": a TensorDict when training (rsl-rl),
         a dict of (N, k) tensors in playback."""
-        prop = observations.proprio(self)
+        prop = self._proprio()
         self._last_proprio = prop  # the next step's history frame
-        actor = torch.cat(
-            [
-                prop,
-                self.history.flatten(1),
-                observations.front_targets_now(self),
-                observations.front_targets_preview(self),
-            ],
-            dim=1,
-        )
+        actor = self.actor_obs.build(prop, self.targets_at)
         groups = {"actor": actor}
         if self.cfg.obs.privileged_critic:
             groups["critic"] = torch.cat([actor, observations.privileged(self)], dim=1)
@@ -144,15 +141,11 @@ class DanceEnv:
         return TensorDict(groups, batch_size=[self.num_envs], device=self.device)
 
     def step(self, actions: torch.Tensor) -> tuple[dict, torch.Tensor, torch.Tensor, dict]:
-        cfg = self.cfg
         actions = actions.to(self.device).clamp(-10.0, 10.0)
-        # History of what the policy saw, before the state changes.
-        if cfg.obs.history_len:
-            # The proprio frame of the last observation is this state's (same tensors).
-            prop = (
-                self._last_proprio if self._last_proprio is not None else observations.proprio(self)
-            )
-            self.history = torch.cat([prop.unsqueeze(1), self.history[:, :-1]], dim=1)
+        # History of what the policy saw, before the state changes: the proprio frame of the
+        # last observation is this state's (same tensors).
+        prop = self._last_proprio if self._last_proprio is not None else self._proprio()
+        self.actor_obs.push(prop)
         self.prev_prev_action, self.prev_action = self.prev_action, self.last_action
         self.last_action = actions
         self.prev_joint_vel = self.robot.joint_vel
@@ -196,6 +189,15 @@ class DanceEnv:
         back = back.clamp(0, self._target_hist.shape[1] - 1)
         return torch.gather(self._target_hist, 1, back[..., None].expand(-1, -1, go1.NUM_JOINTS))
 
+    def measure(self) -> observations.Measurement:
+        """What the robots' sensors read now (with sensor noise when randomising)."""
+        meas = observations.Measurement.from_state(self.robot, self.joint_offset)
+        dr = self.cfg.domain_rand
+        return meas.with_noise(dr, self._gen) if dr.enabled and dr.sensor_noise else meas
+
+    def _proprio(self) -> torch.Tensor:
+        return self.actor_obs.proprio(self.measure(), self.last_action)
+
     def _read_state(self, out=None) -> RobotState:
         out = out if out is not None else self.engine.read()
         return state_from_arrays(out.qpos, out.qvel, out.sensordata, self.engine.layout)
@@ -234,11 +236,15 @@ class DanceEnv:
         ids = (self.episode_length_buf % every == 0).nonzero().squeeze(1)
         if ids.numel() == 0:
             return
+        kick = (torch.rand(ids.numel(), 2, generator=self._gen) * 2 - 1) * dr.push_vel_m_s
+        self.push_base(ids, kick)
+
+    def push_base(self, ids: torch.Tensor, vel_xy_m_s: torch.Tensor) -> None:
+        """Add (n, 2) horizontal velocity, world frame, m/s, to the bases of envs ``ids``."""
         qvel = torch.cat(
             [self.robot.base_lin_vel_w, self.robot.base_ang_vel_b, self.robot.joint_vel], dim=1
         )[ids]
-        kick = (torch.rand(ids.numel(), 2, generator=self._gen) * 2 - 1) * dr.push_vel_m_s
-        qvel[:, :2] += kick.to(self.device)
+        qvel[:, :2] += vel_xy_m_s.to(self.device)
         self.engine.set_velocity(ids, qvel)
 
     def reset_all(self) -> None:
@@ -273,11 +279,8 @@ class DanceEnv:
         self._target_hist[ids] = qpos[:, 7:].unsqueeze(1).expand(-1, 3, -1)
         self.engine.reset(ids, qpos, qvel)
         self.robot = self._read_state()
-        if self.cfg.obs.history_len:
-            self.history[ids] = observations.proprio(self)[ids].unsqueeze(1)
+        self.actor_obs.reset(ids, self._proprio())
 
     @property
     def obs_layout(self) -> dict:
-        return observations.observation_layout(
-            self.cfg.obs.history_len, len(self.preview_steps), self.cfg.obs.privileged_critic
-        )
+        return observations.observation_layout(self.actor_obs, self.cfg.obs.privileged_critic)

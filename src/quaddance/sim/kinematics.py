@@ -1,0 +1,98 @@
+"""Go1 leg kinematics from what the robot itself measures: joint encoders and the IMU.
+
+A real Go1 has no sensor for "foot height above the floor". It can compute the feet's
+positions in the trunk frame from its joint encoders (forward kinematics), turn them
+upright with the IMU's gravity direction, and take the floor to pass through the lowest
+foot (a dancing Go1 always has at least three feet down). The same function runs in
+training (batched over envs) and on the robot (one row), so the actor's foot heights are
+the robot's own estimate, never the simulator's truth.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from quaddance.sim import go1
+from quaddance.sim.scene import SceneCfg, build_model
+
+
+@dataclass(frozen=True)
+class LegGeometry:
+    """Fixed offsets along each leg's chain, trunk frame, m; rows in task foot order
+    (FL, FR, RL, RR). Joints: hip about x, thigh and calf about y (go1.xml)."""
+
+    hip_pos_b: np.ndarray  # (4, 3) hip joint in the trunk frame
+    thigh_offset: np.ndarray  # (4, 3) thigh joint relative to the hip body
+    calf_offset: np.ndarray  # (4, 3) calf joint relative to the thigh body
+    foot_offset: np.ndarray  # (4, 3) foot sphere centre relative to the calf body
+    joint_cols: np.ndarray  # (4, 3) hip, thigh, calf columns in model joint order
+
+
+@functools.lru_cache(maxsize=4)
+def leg_geometry(scene: SceneCfg = SceneCfg()) -> LegGeometry:
+    """Read the leg offsets from the scene's MJCF (mjlab's go1.xml), so there is one source."""
+    model = build_model(scene)
+    rows: dict[str, list[np.ndarray]] = {k: [] for k in ("hip", "thigh", "calf", "foot")}
+    cols = []
+    for foot in go1.FEET:
+        for part in ("hip", "thigh", "calf"):
+            body = model.body(f"{foot}_{part}")
+            # The chain is plain translations + single-axis joints; a rotated body frame
+            # would need its quaternion in the chain, which this model does not use.
+            if not np.allclose(body.quat, [1.0, 0.0, 0.0, 0.0]):
+                raise ValueError(f"{foot}_{part}: rotated body frames are not supported")
+            rows[part].append(np.array(body.pos, dtype=np.float64))
+        rows["foot"].append(np.array(model.site(foot).pos, dtype=np.float64))
+        leg = go1.MODEL_LEGS.index(foot)
+        cols.append([3 * leg, 3 * leg + 1, 3 * leg + 2])
+    return LegGeometry(
+        hip_pos_b=np.stack(rows["hip"]),
+        thigh_offset=np.stack(rows["thigh"]),
+        calf_offset=np.stack(rows["calf"]),
+        foot_offset=np.stack(rows["foot"]),
+        joint_cols=np.asarray(cols),
+    )
+
+
+def _rot_x(angle: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+    c, s = torch.cos(angle), torch.sin(angle)
+    return torch.stack(
+        [v[..., 0], c * v[..., 1] - s * v[..., 2], s * v[..., 1] + c * v[..., 2]], -1
+    )
+
+
+def _rot_y(angle: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+    c, s = torch.cos(angle), torch.sin(angle)
+    return torch.stack(
+        [c * v[..., 0] + s * v[..., 2], v[..., 1], -s * v[..., 0] + c * v[..., 2]], -1
+    )
+
+
+def foot_pos_b(joint_pos: torch.Tensor, geom: LegGeometry) -> torch.Tensor:
+    """(N, 12) joint angles, model order, rad -> (N, 4, 3) foot sphere centres in the trunk
+    frame, m, task foot order."""
+    dev, dt = joint_pos.device, joint_pos.dtype
+    t = lambda a: torch.as_tensor(a, dtype=dt, device=dev)  # noqa: E731
+    q = joint_pos[:, torch.as_tensor(geom.joint_cols.reshape(-1), device=dev)].reshape(-1, 4, 3)
+    p = t(geom.calf_offset) + _rot_y(q[..., 2], t(geom.foot_offset).expand(q.shape[0], 4, 3))
+    p = t(geom.thigh_offset) + _rot_y(q[..., 1], p)
+    return t(geom.hip_pos_b) + _rot_x(q[..., 0], p)
+
+
+def estimate_foot_height_m(
+    joint_pos: torch.Tensor, projected_gravity_b: torch.Tensor, geom: LegGeometry
+) -> torch.Tensor:
+    """(N, 4) foot-bottom heights above a floor through the lowest foot, m.
+
+    ``joint_pos`` (N, 12) as the encoders read them (model order, rad);
+    ``projected_gravity_b`` (N, 3) the IMU's unit gravity direction in the trunk frame. The
+    lowest foot reads 0; on flat ground with three feet down this equals the true height of
+    each foot's bottom above the floor up to contact penetration (a few mm).
+    """
+    up_b = -projected_gravity_b / projected_gravity_b.norm(dim=1, keepdim=True).clamp(min=1e-6)
+    z = (foot_pos_b(joint_pos, geom) * up_b[:, None, :]).sum(dim=2)  # height along world up
+    return z - z.min(dim=1, keepdim=True).values
