@@ -350,3 +350,168 @@ def test_every_command_has_working_help() -> None:
     for path in [(), *commands]:
         result = CliRunner().invoke(app, [*path, "--help"])
         assert result.exit_code == 0 and "Usage" in result.output, (path, result.output)
+
+
+# --- dance.npz ----------------------------------------------------------------------------------
+
+
+def _dance_arrays(n: int = 100) -> dict[str, np.ndarray]:
+    t = np.arange(n) / 50.0
+    feet = np.column_stack([0.1 * np.sin(t) ** 2, 0.05 * np.cos(t) ** 2])
+    return {
+        "fps": np.float64(50.0),
+        "time_s": t,
+        "human_feet_m": feet,
+        "targets_m": np.column_stack([feet, np.zeros((n, 2))]),
+        "beats_s": np.array([0.5, 1.0, 1.5]),
+        "downbeats_s": np.array([0.5]),
+        "mode": np.array("feasible"),
+        "source": np.array("song.wav"),
+        "seed": np.int64(3),
+        "version": np.array("0.1.0"),
+    }
+
+
+@pytest.mark.parametrize(
+    ("change", "words"),
+    [
+        ({"fps": np.float64(1e9)}, "fps must be > 0 and at most 1000"),
+        ({"fps": np.complex128(50)}, "fps must be a single number"),
+        ({"time_s": np.arange(100) / 25.0}, "time_s is not sampled at fps = 50"),
+        ({"time_s": np.arange(100) / 50.0 + 1e6}, "time_s has values"),
+        ({"targets_m": np.full((100, 4), 1e308)}, "targets_m has values"),
+        ({"targets_m": np.zeros((100, 4), complex)}, "targets_m must be a 2-D array of real"),
+        ({"human_feet_m": np.ones((100, 2), bool)}, "human_feet_m must be a 2-D array of real"),
+        ({"beats_s": np.array([1.0, 0.5])}, "beats_s is not in time order"),
+        ({"downbeats_s": np.array([np.inf])}, "downbeats_s contains NaN or infinite"),
+        ({"mode": np.array("dance!")}, "mode must be one of feasible, paper, minmax"),
+        ({"source": np.array("x" * 5000)}, "source: text of 5000 characters"),
+        ({"version": np.array("a\nb")}, "version must be printable text"),
+        ({"seed": np.uint64(2**64 - 1)}, "seed must be in"),
+        ({"beats_s": np.zeros(200_000)}, "beats_s: 2e+05 values"),
+        ({"time_s": np.zeros(0)}, "time_s is empty"),
+    ],
+)
+def test_dance_file_fields_are_checked(tmp_path, change, words) -> None:
+    from quaddance.dancefile import load_dance
+
+    path = tmp_path / "bad.npz"
+    np.savez(path, **{**_dance_arrays(), **change})
+    with pytest.raises(InputFileError) as err:
+        load_dance(path)
+    message = str(err.value)
+    assert words in message and message.startswith(str(path)) and len(message) < 300, message
+
+
+def test_dance_file_array_sizes_are_checked_before_allocating(tmp_path) -> None:
+    """A zip bomb: 400 MB of zeros in a small archive is refused from its header."""
+    import zipfile
+
+    from quaddance.dancefile import load_dance
+
+    path = tmp_path / "bomb.npz"
+    np.savez_compressed(path, **_dance_arrays())
+    header = {"descr": "<f8", "fortran_order": False, "shape": (50_000_000, 4)}
+    with (
+        zipfile.ZipFile(path, "a", compression=zipfile.ZIP_DEFLATED) as zf,
+        zf.open("targets_m.npy", "w", force_zip64=True) as fh,
+    ):  # a second member of the same name: np.load reads the last
+        np.lib.format.write_array_header_1_0(fh, header)
+        fh.write(bytes(1 << 20))  # only the start of the data: the header alone is checked
+    with pytest.raises(InputFileError, match="targets_m: 2e\\+08 values"):
+        load_dance(path)
+
+
+def test_dance_modes_match_the_target_modes() -> None:
+    from quaddance.dancefile import _MODES
+    from quaddance.targets import MODES
+
+    assert _MODES == MODES
+
+
+# --- the policy JSON ----------------------------------------------------------------------------
+
+
+def _shipped_json() -> tuple[Path, dict]:
+    import json
+
+    from quaddance.play.policy import shipped_policy_path
+
+    path = shipped_policy_path().with_suffix(".json")
+    return path, json.loads(path.read_text())
+
+
+def test_shipped_policy_json_round_trips_unchanged() -> None:
+    from quaddance.play.policy_spec import FORMAT, PolicySpec
+
+    path, _ = _shipped_json()
+    spec = PolicySpec.load(path)
+    assert spec.format == FORMAT and spec.obs_dim == 192 and spec.task_cfg.obs.history_len == 3
+    assert spec.to_json() == path.read_text()  # byte for byte
+    assert PolicySpec.from_json(spec.to_json()) == spec
+
+
+def _set(meta: dict, dotted: str, value) -> None:
+    *parents, last = dotted.split(".")
+    for key in parents:
+        meta = meta[key]
+    if value is KeyError:
+        del meta[last]
+    else:
+        meta[last] = value
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "words"),
+    [
+        ("format", "quaddance-policy/2", "format: 'quaddance-policy/2' is not a policy format"),
+        ("kp", float("nan"), "kp: nan is not a finite number"),
+        ("kp", 10**400, "kp: 1000000000"),
+        ("kd", True, "kd: must be a number, got true/false"),
+        ("decimation", 4.5, "decimation: must be a whole number"),
+        ("policy_hz", 60.0, "policy_hz: 60 disagrees with task.policy_hz = 50"),
+        ("nominal_joint_pos_rad", [0.0] * 11, "nominal_joint_pos_rad: must be a list of 12"),
+        ("action_scale", [0.25] * 11 + [1e300], "action_scale[11]: 1e+300"),
+        ("joint_names", ["x"] * 12, "joint_names: must be the Go1's joints"),
+        ("version", "v" * 1000, "version: text of 1000 characters"),
+        ("obs.history_len", 10**9, "obs.history_len: 1000000000 is not in [0, 100]"),
+        ("obs.layout", [{"name": "a", "size": -1}], "obs.layout[0].size: -1 is not in"),
+        ("task.obs.history_len", 4, "obs.history_len: disagrees with task.obs.history_len"),
+        ("task.domain_rand.num_variants", 10**8, "task.domain_rand.num_variants: 100000000"),
+        ("task.domain_rand.friction", [3.0, 0.1], "friction: the range's low end is above"),
+        ("task.rewards.form", "exp", "task.rewards.form: 'exp' is not one of paper, l2"),
+        ("task.scene.warp", 1, "task.scene: unknown field 'warp'"),
+        ("task.front_feedforward", "yes", "task.front_feedforward: must be true or false"),
+        ("front_feedforward", KeyError, "the file: missing field front_feedforward"),
+        ("front_feedforward.heights_m", [0.0] * 46, "front_feedforward.heights_m: must be"),
+        ("targets.max_height_m", -0.1, "targets.max_height_m: -0.1 is not a finite"),
+        ("training.notes", {"a": 1}, "training.'notes': must be text, a number or null"),
+        ("surprise", 1, "the file: unknown field 'surprise'"),
+    ],
+)
+def test_policy_json_fields_are_checked(tmp_path, field, value, words) -> None:
+    import json
+
+    from quaddance.play.policy_spec import PolicySpec
+
+    _, meta = _shipped_json()
+    _set(meta, field, value)
+    path = tmp_path / "policy.json"
+    path.write_text(json.dumps(meta))
+    with pytest.raises(InputFileError) as err:
+        PolicySpec.load(path)
+    message = str(err.value)
+    assert message.startswith(f"{path}: ") and words in message and len(message) < 300, message
+
+
+@pytest.mark.parametrize(
+    "text", ["[" * 100_000, '{"a": 1e999999}', "9" * 5000, "\ud800", '{"kp": NaN}']
+)
+def test_policy_json_that_is_not_json_or_not_an_object(tmp_path, text) -> None:
+    from quaddance.play.policy_spec import PolicySpec
+
+    path = tmp_path / "policy.json"
+    path.write_text(text, encoding="utf-8", errors="surrogatepass")
+    with pytest.raises(InputFileError) as err:
+        PolicySpec.load(path)
+    assert str(err.value).startswith(str(path)) and len(str(err.value)) < 300

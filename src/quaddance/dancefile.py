@@ -21,7 +21,9 @@ version        () unicode   quaddance version that wrote the file
 
 from __future__ import annotations
 
+import struct
 import zipfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,6 +31,14 @@ import numpy as np
 
 from quaddance.errors import InputFileError
 from quaddance.fileio import atomic_path
+
+# What a damaged archive raises: zipfile and zlib errors, NotImplementedError (unknown
+# compression method), RuntimeError (encrypted member), struct.error (cut headers).
+_ARCHIVE_ERRORS = (
+    OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError,
+    RuntimeError, struct.error,
+)  # fmt: skip
+_MODES = ("feasible", "paper", "minmax")  # quaddance.targets.MODES (not imported: keep this light)
 
 KEYS: tuple[str, ...] = (
     "fps",
@@ -43,6 +53,21 @@ KEYS: tuple[str, ...] = (
     "version",
 )
 _STRING_KEYS = ("mode", "source", "version")
+
+MAX_DANCE_S = 30 * 60.0
+"""Longest dance read, s (the longest song, 20 min, plus room for a long motion file)."""
+MAX_FPS = 1000.0
+"""Highest curve rate read, Hz (the policy runs at 50)."""
+MAX_FRAMES = int(MAX_DANCE_S * MAX_FPS)
+"""Most samples in a curve; checked in the archive's headers before any array is read."""
+MAX_BEATS = 100_000
+"""Most beats or downbeats (a 30-minute dance at 300 BPM has 9000)."""
+MAX_HEIGHT_M = 20.0
+"""Largest foot height or target read, m (paper mode asks up to h0 = 10 m at most)."""
+MAX_TEXT_CHARS = {"mode": 16, "source": 1000, "version": 64}
+"""Longest text of each string field, characters."""
+MAX_FILE_BYTES = 256 << 20
+"""Largest dance file read, bytes (a 20-minute dance is about 3 MB)."""
 
 
 @dataclass
@@ -102,7 +127,10 @@ def load_dance(path: str | Path) -> Dance:
     path = Path(path)
     if not path.is_file():
         raise InputFileError(path, "no such file")
+    if path.stat().st_size > MAX_FILE_BYTES:
+        raise InputFileError(path, f"is {path.stat().st_size} bytes, too large for a dance file")
     try:
+        _check_headers(path)
         loaded = np.load(path, allow_pickle=False)
         if not isinstance(loaded, np.lib.npyio.NpzFile):
             raise InputFileError(path, "not a dance file (a single .npy array, not an .npz)")
@@ -113,13 +141,49 @@ def load_dance(path: str | Path) -> Dance:
             raw = {key: npz[key] for key in KEYS}
     except InputFileError:
         raise
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as err:
-        raise InputFileError(path, f"cannot read as a dance .npz ({err})") from None
+    except _ARCHIVE_ERRORS as err:
+        problem = " ".join(str(err).split())[:200]
+        raise InputFileError(path, f"cannot read as a dance .npz ({problem})") from None
     return _check(path, raw)
 
 
+def _check_headers(path: Path) -> None:
+    """Refuse an archive whose arrays are too large or of the wrong kind, from their headers,
+    before numpy allocates them (a few compressed bytes can inflate to gigabytes)."""
+    if not zipfile.is_zipfile(path):
+        return  # np.load says what it is (a single .npy, text, ...)
+    with zipfile.ZipFile(path) as zf:
+        members = zf.infolist()
+        if len(members) > 4 * len(KEYS):
+            raise InputFileError(path, f"not a dance file: {len(members)} arrays in the archive")
+        for info in members:
+            key = info.filename.removesuffix(".npy")
+            if key not in KEYS:
+                continue  # extra members are never read
+            with zf.open(info) as fh:
+                version = np.lib.format.read_magic(fh)
+                if version == (1, 0):
+                    shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
+                else:
+                    shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
+            limit = MAX_BEATS if key in ("beats_s", "downbeats_s") else 4 * MAX_FRAMES
+            count = float(np.prod(shape, dtype=np.float64))
+            if count > limit or count * dtype.itemsize > 8 * limit:
+                raise InputFileError(
+                    path, f"{key}: {count:.4g} values of {dtype.itemsize} bytes, too large"
+                )
+            if dtype.kind in "OV":  # objects (pickles) and records: never in a dance file
+                raise InputFileError(path, f"{key}: unsupported array type {dtype}")
+            if dtype.kind == "U" and dtype.itemsize > 4 * MAX_TEXT_CHARS.get(key, 64):
+                raise InputFileError(
+                    path,
+                    f"{key}: text of {dtype.itemsize // 4} characters, at most "
+                    f"{MAX_TEXT_CHARS.get(key, 64)}",
+                )
+
+
 def _check(path: Path, raw: dict[str, np.ndarray]) -> Dance:
-    """Validate the arrays of a dance file and build the `Dance`."""
+    """Validate the arrays of a dance file and build the `Dance`; every error names the key."""
 
     def number(key: str, kind: str) -> np.ndarray:
         arr = raw[key]
@@ -135,40 +199,67 @@ def _check(path: Path, raw: dict[str, np.ndarray]) -> Dance:
         arr = raw[key]
         if arr.shape != () or arr.dtype.kind != "U":
             raise InputFileError(path, f"{key} must be a text value, got {arr.dtype} {arr.shape}")
-        return str(arr)
+        value = str(arr)
+        if len(value) > MAX_TEXT_CHARS[key] or not value.isprintable():
+            raise InputFileError(
+                path, f"{key} must be printable text of at most {MAX_TEXT_CHARS[key]} characters"
+            )
+        return value
 
-    def curve(key: str, ndim: int) -> np.ndarray:
+    def curve(key: str, ndim: int, lo: float, hi: float) -> np.ndarray:
         arr = raw[key]
+        # bool is refused: a curve of true/false is not heights or times.
         if arr.ndim != ndim or arr.dtype.kind not in "fiu":
-            raise InputFileError(path, f"{key} must be a {ndim}-D numeric array, got {arr.shape}")
-        if not np.all(np.isfinite(arr)):
+            raise InputFileError(
+                path, f"{key} must be a {ndim}-D array of real numbers, got {arr.dtype} {arr.shape}"
+            )
+        out = arr.astype(np.float64)
+        if not np.all(np.isfinite(out)):
             raise InputFileError(path, f"{key} contains NaN or infinite values")
-        return arr.astype(np.float64)
+        if out.size and not (lo <= out.min() and out.max() <= hi):
+            raise InputFileError(
+                path,
+                f"{key} has values in [{out.min():.4g}, {out.max():.4g}], outside [{lo:g}, {hi:g}]",
+            )
+        return out
 
     fps = float(number("fps", "fiu"))
-    if fps <= 0:
-        raise InputFileError(path, f"fps must be > 0, got {fps}")
-    time_s = curve("time_s", 1)
+    if not 0 < fps <= MAX_FPS:
+        raise InputFileError(path, f"fps must be > 0 and at most {MAX_FPS:g} Hz, got {fps}")
+    time_s = curve("time_s", 1, 0.0, MAX_DANCE_S)
     n = time_s.size
     if n == 0:
         raise InputFileError(path, "time_s is empty")
     if n > 1 and not np.all(np.diff(time_s) > 0):
         raise InputFileError(path, "time_s is not increasing")
-    human = curve("human_feet_m", 2)
+    if n > 1 and not np.allclose(np.diff(time_s), 1.0 / fps, rtol=1e-6, atol=1e-9):
+        raise InputFileError(path, f"time_s is not sampled at fps = {fps:g} Hz")
+    human = curve("human_feet_m", 2, -MAX_HEIGHT_M, MAX_HEIGHT_M)
     if human.shape != (n, 2):
         raise InputFileError(path, f"human_feet_m must have shape ({n}, 2), got {human.shape}")
-    targets = curve("targets_m", 2)
+    targets = curve("targets_m", 2, -MAX_HEIGHT_M, MAX_HEIGHT_M)
     if targets.shape != (n, 4):
         raise InputFileError(path, f"targets_m must have shape ({n}, 4), got {targets.shape}")
+    beats = {}
+    for key in ("beats_s", "downbeats_s"):
+        beats[key] = curve(key, 1, -MAX_DANCE_S, 2 * MAX_DANCE_S)
+        if beats[key].size > 1 and np.any(np.diff(beats[key]) < 0):
+            raise InputFileError(path, f"{key} is not in time order")
+    mode = text("mode")
+    if mode not in _MODES:
+        raise InputFileError(path, f"mode must be one of {', '.join(_MODES)}, got {mode!r}")
+    seed = int(number("seed", "iu"))
+    if not 0 <= seed < 2**63:
+        raise InputFileError(path, f"seed must be in [0, 2**63), got {seed}")
     return Dance(
         fps=fps,
         time_s=time_s,
         human_feet_m=human,
         targets_m=targets,
-        beats_s=curve("beats_s", 1),
-        downbeats_s=curve("downbeats_s", 1),
-        mode=text("mode"),
+        beats_s=beats["beats_s"],
+        downbeats_s=beats["downbeats_s"],
+        mode=mode,
         source=text("source"),
-        seed=int(number("seed", "iu")),
+        seed=seed,
         version=text("version"),
     )

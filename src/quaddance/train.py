@@ -25,7 +25,7 @@ import torch
 
 from quaddance import __version__
 from quaddance.errors import InputFileError, QuaddanceError
-from quaddance.fileio import atomic_path, write_json
+from quaddance.fileio import atomic_path
 from quaddance.sim import go1
 from quaddance.sim.config import DanceTaskCfg, RewardCfg
 from quaddance.sim.feedforward import LUT_HEIGHTS_M
@@ -320,7 +320,10 @@ class Trainer:
         out_dir = out_dir or self.cfg.run_dir
         onnx_path, json_path = out_dir / "policy.onnx", out_dir / "policy.json"
         export_onnx(self.alg.get_policy(), onnx_path)
-        write_json(json_path, policy_metadata(self.env, self.cfg, self))
+        from quaddance.play.policy_spec import PolicySpec
+
+        # Through the one class that reads it back: an export that would not load fails here.
+        PolicySpec.from_dict(policy_metadata(self.env, self.cfg, self), json_path).save(json_path)
         curve = self.cfg.run_dir / "curve.csv"
         if curve.exists():
             from quaddance.play.plots import plot_learning_curve

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -10,9 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from quaddance.errors import InputFileError
-from quaddance.sim.config import DanceTaskCfg, DomainRandCfg, ObsCfg, RewardCfg
-from quaddance.sim.feedforward import LUT_HEIGHTS_M
-from quaddance.sim.scene import SceneCfg
+from quaddance.play.policy_spec import PolicySpec
+from quaddance.sim.config import DanceTaskCfg
 
 
 def shipped_policy_path() -> Path:
@@ -20,25 +18,17 @@ def shipped_policy_path() -> Path:
     return Path(str(resources.files("quaddance") / "data" / "policies" / "go1_dance.onnx"))
 
 
-def task_cfg_from_json(task: dict) -> DanceTaskCfg:
-    """Rebuild the task settings a policy was trained with (JSON `task` section)."""
-    task = dict(task)
-    scene = SceneCfg(**task.pop("scene"))
-    rewards = RewardCfg(**task.pop("rewards"))
-    dr = task.pop("domain_rand")
-    dr = DomainRandCfg(**{k: tuple(v) if isinstance(v, list) else v for k, v in dr.items()})
-    obs = task.pop("obs")
-    obs = ObsCfg(**{k: tuple(v) if isinstance(v, list) else v for k, v in obs.items()})
-    return DanceTaskCfg(scene=scene, rewards=rewards, domain_rand=dr, obs=obs, **task)
-
-
 @dataclass
 class OnnxPolicy:
-    """Deterministic actor: `act(obs (B, D)) -> actions (B, 12)`."""
+    """Deterministic actor: `act(obs (B, D)) -> actions (B, 12)`.
+
+    ``spec`` is the checked JSON contract; ``meta`` the same as a plain dict.
+    """
 
     onnx_path: Path
     meta: dict
     task: DanceTaskCfg
+    spec: PolicySpec | None = None
 
     @classmethod
     def load(cls, onnx_path: str | Path) -> OnnxPolicy:
@@ -48,18 +38,8 @@ class OnnxPolicy:
             raise InputFileError(onnx_path, "no such policy file")
         if not json_path.is_file():
             raise InputFileError(json_path, "missing: a policy needs its JSON beside the .onnx")
-        try:
-            meta = json.loads(json_path.read_text())
-            task = task_cfg_from_json(meta["task"])
-            obs_dim = int(meta["obs"]["dim"])
-        except (json.JSONDecodeError, KeyError, TypeError, ValueError) as err:
-            raise InputFileError(json_path, f"not a quaddance policy description ({err})") from err
-        if task.front_feedforward:
-            table = (meta.get("front_feedforward") or {}).get("thigh_calf_offsets_rad", [])
-            if np.asarray(table, dtype=float).shape != (LUT_HEIGHTS_M.size, 2):
-                raise InputFileError(
-                    json_path, "front_feedforward.thigh_calf_offsets_rad is missing or malformed"
-                )
+        spec = PolicySpec.load(json_path)
+        obs_dim = spec.obs_dim
         import onnxruntime as ort
 
         opts = ort.SessionOptions()
@@ -67,13 +47,14 @@ class OnnxPolicy:
         try:
             session = ort.InferenceSession(str(onnx_path), opts, providers=["CPUExecutionProvider"])
         except Exception as err:  # onnxruntime raises its own untyped errors
-            raise InputFileError(onnx_path, f"not a readable ONNX model ({err})") from err
+            first = (str(err).strip().splitlines() or ["?"])[0][:200]
+            raise InputFileError(onnx_path, f"not a readable ONNX model ({first})") from err
         inp = session.get_inputs()[0]
         if inp.shape[-1] != obs_dim:
             raise InputFileError(
                 onnx_path, f"model takes {inp.shape[-1]} observations but its JSON says {obs_dim}"
             )
-        policy = cls(onnx_path, meta, task)
+        policy = cls(onnx_path, spec.to_dict(), spec.task_cfg, spec)
         policy._session = session
         policy._input = inp.name
         return policy
