@@ -10,12 +10,15 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from quaddance.dancefile import Dance, save_dance
 from quaddance.errors import InputFileError
 from quaddance.fileio import check_output_file, ensure_dir, write_json
 from quaddance.play.policy import OnnxPolicy, shipped_policy_path
+
+if TYPE_CHECKING:
+    from quaddance.play.rollout import PinnedDynamics
 
 
 @dataclass
@@ -31,6 +34,8 @@ class DanceJob:
     video: bool = True
     randomize: bool = False
     sim_seed: int | None = None  # seed of the randomised dynamics; None: `seed`
+    policy_output: str = "policy"  # "zero": the front-lift feed-forward alone (baseline)
+    pinned: PinnedDynamics | None = None  # fixed dynamics and pushes (robustness envelope)
     width: int = 640
     height: int = 480
     target_markers: bool = True
@@ -90,7 +95,15 @@ def run_dance(
 
     status("dancing (simulation)")
     sim_seed = job.seed if job.sim_seed is None else job.sim_seed
-    result = rollout(dance, policy, randomize=job.randomize, seed=sim_seed, progress=sim_progress)
+    result = rollout(
+        dance,
+        policy,
+        randomize=job.randomize,
+        seed=sim_seed,
+        progress=sim_progress,
+        policy_output=job.policy_output,
+        pinned=job.pinned,
+    )
     timings["simulation_s"] = result.sim_wall_s
 
     render_s = None

@@ -1,36 +1,24 @@
 """`quaddance eval`: run a policy over many songs and motions (no video) and report.
 
-Also builds a held-out evaluation set the shipped policy never trained on: songs made by
-code at other tempi and seeds than the training bank, plus EDGE- and AIST++-style motion
-files made by SMPL forward kinematics.
+Held-out sets to run it on are written by `quaddance.bench.heldout`.
 """
 
 from __future__ import annotations
 
-import pickle
+import dataclasses
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from quaddance.errors import QuaddanceError
-from quaddance.fileio import atomic_path
+from quaddance.fileio import atomic_path, write_json
+from quaddance.play.rollout import PinnedDynamics
 
 AUDIO_EXT = {".wav", ".flac", ".ogg", ".mp3"}
 MOTION_EXT = {".pkl", ".pickle", ".bvh"}
-
-# Held-out songs: (tempo_bpm, seed, swing, syncopation); seeds far from the bank's.
-HELD_OUT_SONGS: tuple[tuple[float, int, float, bool], ...] = (
-    (84.0, 9001, 0.0, False),
-    (96.0, 9002, 0.3, False),
-    (104.0, 9003, 0.0, True),
-    (112.0, 9004, 0.0, False),
-    (124.0, 9005, 0.5, False),
-    (132.0, 9006, 0.0, True),
-    (142.0, 9007, 0.0, False),
-    (156.0, 9008, 0.2, True),
-)
 
 
 def collect_items(paths: Sequence[Path]) -> list[Path]:
@@ -49,77 +37,58 @@ def collect_items(paths: Sequence[Path]) -> list[Path]:
     return items
 
 
-def _stepping_poses(n: int, fps: float, tempo_bpm: float, seed: int) -> np.ndarray:
-    """(n, 72) SMPL axis-angle poses of a dancer stepping left/right on the beat."""
-    rng = np.random.default_rng(seed)
-    t = np.arange(n) / fps
-    beat = 60.0 / tempo_bpm
-    poses = np.zeros((n, 72))
-    for side, (hip, knee) in enumerate(((1, 4), (2, 5))):  # SMPL joints: hips 1/2, knees 4/5
-        phase = (t / beat - side) % 2.0  # each leg lifts every other beat
-        lift = np.where(phase < 1.0, np.sin(np.pi * phase) ** 2, 0.0)
-        amp = rng.uniform(0.5, 0.9)
-        poses[:, 3 * hip] = -amp * lift  # hip flexion (about x)
-        poses[:, 3 * knee] = 2.0 * amp * lift  # knee flexion
-    return poses
+@dataclass(frozen=True)
+class EvalSettings:
+    """How each item is danced: the dynamics and what drives the joints."""
+
+    seed: int = 0  #: choreographer seed; item i's randomised dynamics use seed 1000 * seed + i
+    randomize: bool = False  #: dynamics drawn as in training (`sim.config.DomainRandCfg`)
+    policy_output: str = "policy"  #: "zero": the front-lift feed-forward alone
+    pinned: PinnedDynamics | None = None  #: fixed dynamics and pushes (robustness envelope)
+    mode: str = "feasible"  #: target mode
+
+    def describe(self) -> str:
+        """One sentence for the report's heading."""
+        if self.randomize:
+            dyn = "dynamics randomised as in training (a different draw per item)"
+        elif self.pinned is not None:
+            dyn = f"dynamics pinned to {_describe_pinned(self.pinned)}"
+        else:
+            dyn = "no domain randomisation"
+        drive = (
+            "feed-forward alone (policy output replaced by zeros)"
+            if self.policy_output == "zero"
+            else "policy + feed-forward"
+        )
+        return f"{dyn}; {drive}; {self.mode} targets"
 
 
-def write_held_out_set(folder: Path, duration_s: float = 20.0) -> list[Path]:
-    """Write the held-out evaluation set into `folder`; returns its files."""
-    import soundfile as sf
-
-    from quaddance.choreo.smpl import smpl_joints
-    from quaddance.music.synth import render_song
-
-    folder.mkdir(parents=True, exist_ok=True)
-    files = []
-    for tempo, seed, swing, sync in HELD_OUT_SONGS:
-        path = folder / f"song_{int(tempo)}bpm_seed{seed}.wav"
-        if not path.exists():
-            y, _ = render_song(tempo, duration_s, seed, swing=swing, syncopation=sync)
-            with atomic_path(path) as tmp:
-                sf.write(tmp, y, 22050)
-        files.append(path)
-    # EDGE style: full_pose (T, 24, 3) z-up metres at 30 fps.
-    edge_poses = _stepping_poses(int(duration_s * 30), 30.0, 110.0, seed=9101)
-    joints = smpl_joints(edge_poses, np.tile([0.0, 0.95, 0.0], (len(edge_poses), 1)))
-    z_up = np.stack([joints[..., 0], -joints[..., 2], joints[..., 1]], axis=-1)
-    edge = {
-        "smpl_poses": edge_poses,
-        "smpl_trans": np.zeros((len(edge_poses), 3)),
-        "full_pose": z_up,
-    }
-    # AIST++ style: poses + translation in centimetre-like units with a scaling, y-up, 60 fps.
-    aist_poses = _stepping_poses(int(duration_s * 60), 60.0, 126.0, seed=9102)
-    aist = {
-        "smpl_poses": aist_poses,
-        "smpl_trans": np.tile([0.0, 0.95 * 93.0, 0.0], (len(aist_poses), 1)),
-        "smpl_scaling": np.array([93.0]),
-    }
-    for name, obj in (("edge_style.pkl", edge), ("aistpp_style.pkl", aist)):
-        path = folder / name
-        with atomic_path(path) as tmp, tmp.open("wb") as f:
-            pickle.dump(obj, f, protocol=4)  # writing our own data; loading is the safe side
-        files.append(path)
-    return files
+def _describe_pinned(p: PinnedDynamics) -> str:
+    parts = [
+        f"friction {p.friction}" if p.friction is not None else "nominal friction",
+        f"added mass {p.added_mass_kg:+.1f} kg",
+        f"motor strength {p.motor_strength:.2f}",
+        f"action lag {1e3 * p.action_lag_s:.0f} ms",
+    ]
+    if p.push_vel_m_s > 0:
+        parts.append(
+            f"pushes of {p.push_vel_m_s:.2f} m/s every {p.push_every_s:g} s from "
+            f"{p.push_first_s:g} s"
+        )
+    return ", ".join(parts)
 
 
-def evaluate(
+def evaluate_items(
     items: Sequence[Path],
     policy: Path | None,
-    report: Path,
-    seed: int = 0,
+    settings: EvalSettings = EvalSettings(),
     progress: Callable[[int, int, str], None] | None = None,
-    randomize: bool = False,
 ) -> list[dict[str, Any]]:
-    """Dance each item without video; write a markdown table (+ mean) and a plot.
-
-    ``randomize`` draws the robot's dynamics as in training (friction, mass, strength,
-    joint offsets, action lag, pushes): a robustness check."""
+    """Dance each item without video; one row per item: ``name`` + every key of its
+    metrics.json."""
     import tempfile
 
     from quaddance.play.dance import DanceJob, run_dance
-    from quaddance.play.plots import plot_eval
 
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -132,18 +101,52 @@ def evaluate(
                 song=None if is_motion else item,
                 motion=item if is_motion else None,
                 policy=policy,
-                seed=seed,
+                mode=settings.mode,
+                seed=settings.seed,
                 video=False,
+                randomize=settings.randomize,
+                # One draw of the dynamics per item, not the same robot for every item.
+                sim_seed=1000 * settings.seed + i,
+                policy_output=settings.policy_output,
+                pinned=settings.pinned,
             )
-            metrics = run_dance(job).metrics
-            rows.append({"name": item.name, **metrics})
+            rows.append({"name": item.name, **run_dance(job).metrics})
     if progress:
         progress(len(items), len(items), "")
+    return rows
+
+
+def evaluate(
+    items: Sequence[Path],
+    policy: Path | None,
+    report: Path,
+    settings: EvalSettings = EvalSettings(),
+    progress: Callable[[int, int, str], None] | None = None,
+    title: str | None = None,
+) -> list[dict[str, Any]]:
+    """Dance each item (see `evaluate_items`) and write the report: ``report`` (markdown:
+    table + mean), the same numbers as JSON beside it (``.json``: ``items``, ``mean``,
+    ``settings``) and a plot (``.png``)."""
+    from quaddance.play.plots import plot_eval
+
+    rows = evaluate_items(items, policy, settings, progress)
     plot_path = report.with_suffix(".png")
     plot_eval(plot_path, rows)
+    write_json(
+        report.with_suffix(".json"),
+        {"items": rows, "mean": summarize(rows), "settings": settings_dict(settings, policy)},
+    )
     with atomic_path(report) as tmp:
-        tmp.write_text(markdown_report(rows, policy, plot_path.name, randomize))
+        tmp.write_text(markdown_report(rows, policy, plot_path.name, settings, title))
     return rows
+
+
+def settings_dict(settings: EvalSettings, policy: Path | None) -> dict[str, Any]:
+    """JSON-ready settings of an evaluation."""
+    d = dataclasses.asdict(settings)
+    d["policy"] = str(policy) if policy else "shipped"
+    d["description"] = settings.describe()
+    return d
 
 
 def _num(v: Any, scale: float = 1.0, digits: int = 2) -> str:
@@ -173,7 +176,11 @@ def summarize(rows: Sequence[dict[str, Any]]) -> dict[str, float | None]:
 
 
 def markdown_report(
-    rows: Sequence[dict[str, Any]], policy: Path | None, plot_name: str, randomize: bool = False
+    rows: Sequence[dict[str, Any]],
+    policy: Path | None,
+    plot_name: str,
+    settings: EvalSettings = EvalSettings(),
+    title: str | None = None,
 ) -> str:
     head = (
         "| item | falls | FL MAE feas. (cm) | FR MAE feas. (cm) | FL corr feas. | FR corr feas. "
@@ -199,10 +206,10 @@ def markdown_report(
         f"{_num(s['bas'])} | {_num(s['realtime_factor_sim'], 1, 1)} |"
     )
     return (
-        f"# quaddance evaluation\n\npolicy: `{policy or 'shipped'}`, {len(rows)} items, "
-        + ("dynamics randomised as in training" if randomize else "no domain randomisation")
-        + ". MAE/corr per front foot; *feas.* = the feasible part of the "
-        "targets (see `quaddance.play.metrics`).\n\n"
+        f"# {title or 'quaddance evaluation'}\n\npolicy: `{policy or 'shipped'}`, "
+        f"{len(rows)} items; {settings.describe()}. MAE/corr per front foot; *feas.* = the "
+        "feasible part of the targets (see `quaddance.play.metrics`); BAS needs music beats "
+        "(none for a motion file alone). The same numbers: the `.json` beside this file.\n\n"
         + head
         + "\n".join(lines)
         + f"\n\n![metrics]({plot_name})\n"

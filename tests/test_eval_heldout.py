@@ -1,0 +1,204 @@
+"""Held-out sets beyond the training generator, the robustness envelope, and the training
+switch of the feed-forward ablation."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import soundfile as sf
+import torch
+from scipy.signal import find_peaks
+from typer.testing import CliRunner
+
+from quaddance.bench import envelope
+from quaddance.bench.heldout import OTHER_ITEMS, render_feet, write_held_out_set
+from quaddance.choreo.motion import load_motion
+from quaddance.cli import app
+from quaddance.music.synth import render_song
+from quaddance.play.rollout import PinnedDynamics
+from quaddance.sim import go1
+
+DURATION_S = 12.0
+
+
+@pytest.fixture(scope="module")
+def other_set(tmp_path_factory) -> dict[str, tuple[object, np.ndarray, np.ndarray, str]]:
+    """name -> (item, designed feet at the file's rate, loaded feet, loader's description)."""
+    files = write_held_out_set(tmp_path_factory.mktemp("other"), "other", DURATION_S)
+    out = {}
+    for item, path in zip(OTHER_ITEMS, files, strict=True):
+        motion = load_motion(path)
+        lifts = item.pattern(np.random.default_rng(item.seed), DURATION_S)
+        designed = render_feet(lifts, DURATION_S, motion.fps)
+        out[item.name] = (item, designed, motion.feet_m, motion.source)
+    return out
+
+
+def test_other_set_files_load_back_as_the_designed_foot_heights(other_set):
+    for name, (_, designed, loaded, _) in other_set.items():
+        n = min(len(designed), len(loaded))
+        assert abs(len(designed) - len(loaded)) <= 1, name
+        # SMPL knee axes are not exactly lateral: a few cm at the highest lifts.
+        assert np.abs(designed[:n] - loaded[:n]).max() < 0.05, name
+        assert loaded.max() > 0.05, name
+
+
+def test_other_set_spans_formats_units_and_axes(other_set):
+    sources = " | ".join(src for *_, src in other_set.values())
+    for needle in ("BVH, cm", "BVH, inch", "BVH, mm", "BVH, m,", "z-up", "y-up"):
+        assert needle in sources
+    for needle in ("EDGE full_pose", "EDGE SMPL parameters", "AIST++ SMPL"):
+        assert needle in sources
+    ankles = {
+        src.split("ankles ")[1].split(",")[0] for *_, src in other_set.values() if "BVH" in src
+    }
+    assert len(ankles) == 5  # five skeletons, five naming schemes
+
+
+def _peaks(feet: np.ndarray, fps: float) -> list[np.ndarray]:
+    return [find_peaks(feet[:, k], prominence=0.03)[0] / fps for k in (0, 1)]
+
+
+def test_other_set_patterns_are_what_their_names_say(other_set):
+    def get(prefix):
+        _, designed, loaded, _ = next(v for k, v in other_set.items() if k.startswith(prefix))
+        fps = len(loaded) / DURATION_S
+        return designed, loaded, fps
+
+    _, feet, fps = get("holds_60bpm")
+    up = feet.max(axis=1) > 0.9 * feet.max()
+    runs = np.diff(np.flatnonzero(np.diff(np.r_[0, up.astype(int), 0])))[::2]
+    assert runs.max() / fps >= 2.9  # holds of 3 beats at 60 BPM
+
+    _, feet, fps = get("alternation_200bpm")
+    peaks = np.sort(np.concatenate(_peaks(feet, fps)))
+    assert np.median(np.diff(peaks)) == pytest.approx(0.3, abs=0.02)  # a step per 200 BPM beat
+
+    _, feet, _ = get("high_knees")
+    assert feet.max() >= 0.5
+
+    _, feet, _ = get("jumps")
+    assert (feet.min(axis=1) > 0.05).any()  # both feet off the floor together
+
+    designed, _, fps = get("accelerando")
+    gaps = np.diff(np.sort(np.concatenate(_peaks(designed, fps))))
+    assert gaps.max() > 0.8 and gaps.min() < 0.45  # from about 60 to about 150+ BPM
+
+
+# --- the envelope ---------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def song(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("song") / "song_4s.wav"
+    y, _ = render_song(120.0, 4.0, seed=3)
+    sf.write(path, y, 22050)
+    return path
+
+
+@pytest.fixture(scope="module")
+def small_envelope(song) -> dict:
+    return envelope.run_envelope(
+        [song],
+        conditions={"nominal": PinnedDynamics(), "friction 0.1": PinnedDynamics(friction=0.1)},
+        push_bases={"nominal": PinnedDynamics()},
+        vels_m_s=(0.25, 3.0),
+    )
+
+
+def test_envelope_reports_the_first_push_that_makes_it_fall(small_envelope):
+    sweep = small_envelope["pushes"]["nominal"]
+    assert [v["push_vel_m_s"] for v in sweep["per_vel"]] == [0.25, 3.0]
+    assert sweep["per_vel"][0]["falls"] == 0
+    assert sweep["per_vel"][1]["falls"] >= 1
+    assert sweep["per_vel"][1]["pushes_followed_by_a_fall"][0]["push_s"] == 2.0
+    assert sweep["first_fall_vel_m_s"] == 3.0
+
+
+def test_envelope_conditions_change_the_robot(small_envelope):
+    ends = small_envelope["range_ends"]
+    assert ends["friction 0.1"]["dynamics"]["friction"] == 0.1
+    assert ends["friction 0.1"]["mae_m"] != ends["nominal"]["mae_m"]
+
+
+def test_envelope_stops_the_sweep_after_falls_in_a_row(song, monkeypatch):
+    tried = []
+
+    def fake(items, policy, settings):
+        tried.append(settings.pinned.push_vel_m_s)
+        return [{**_row(), "falls_s": [2.1]}]
+
+    monkeypatch.setattr(envelope, "evaluate_items", fake)
+    result = envelope.push_sweep([song], None, PinnedDynamics(), (0.5, 1.0, 1.5, 2.0))
+    assert tried == [0.5, 1.0]
+    assert result["first_fall_vel_m_s"] == 0.5
+
+
+def _row() -> dict:
+    from quaddance.play.metrics import dance_metrics
+
+    t = np.arange(200) / 50.0
+    feet = np.zeros((200, 4))
+    return {"name": "x", **dance_metrics(t, feet, feet, [], [], 1.0, None)}
+
+
+def test_bench_envelope_command_writes_json_and_markdown(
+    song, small_envelope, tmp_path, monkeypatch
+):
+    monkeypatch.setattr(envelope, "run_envelope", lambda items, policy, log: small_envelope)
+    out, report = tmp_path / "env.json", tmp_path / "env.md"
+    args = ["bench", "envelope", str(song), "--out", str(out), "--report", str(report)]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    assert json.loads(out.read_text())["pushes"]["nominal"]["first_fall_vel_m_s"] == 3.0
+    text = report.read_text()
+    assert "first fall at 3.00 m/s" in text
+    assert "| friction 0.1 |" in text
+    assert "quaddance bench envelope" in text
+
+
+# --- the feed-forward ablation's training switch ------------------------------------------
+
+
+@pytest.mark.parametrize(("flags", "expected"), [([], True), (["--no-feedforward"], False)])
+def test_train_no_feedforward_flag_turns_the_feedforward_off(
+    tmp_path, monkeypatch, flags, expected
+):
+    import quaddance.train as train_mod
+
+    seen = []
+
+    def fake_train(cfg, **kwargs):
+        seen.append(cfg)
+        return SimpleNamespace(iteration=0, env_steps=0, wall_s=0.0)
+
+    monkeypatch.setattr(train_mod, "train", fake_train)
+    monkeypatch.setattr(train_mod, "build_bank", lambda cfg: np.zeros((1, 10, 4)))
+    args = ["train", "--run-dir", str(tmp_path / "run"), "--no-progress", *flags]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    assert seen[0].task.front_feedforward is expected
+
+
+def test_without_feedforward_the_joint_targets_are_the_policy_alone():
+    from quaddance.sim.config import DanceTaskCfg
+    from quaddance.sim.task import DanceEnv
+    from quaddance.train import TrainCfg, policy_metadata
+
+    bank = np.zeros((1, 60, 4), np.float32)
+    bank[0, :, 0] = 0.2  # front-left asked 0.2 m up all along
+    targets = {}
+    for on in (True, False):
+        cfg = DanceTaskCfg(num_envs=1, front_feedforward=on)
+        env = DanceEnv(cfg, bank, compute_rewards=False)
+        targets[on] = env.joint_targets(torch.zeros(1, 12))[0]
+        meta = policy_metadata(env, TrainCfg(task=cfg))
+        assert (meta["front_feedforward"] is None) is (not on)
+        assert meta["task"]["front_feedforward"] is on
+    nominal = torch.tensor(go1.nominal_joint_pos())
+    torch.testing.assert_close(targets[False], nominal)
+    assert (targets[True] - nominal).abs().max() > 0.1
