@@ -306,6 +306,34 @@ def test_video_with_music_is_in_sync_and_shows_the_robot(tmp_path: Path, scene_m
     assert (middle < 50).mean() > 0.03
 
 
+def test_frames_from_several_workers_come_in_order(tmp_path: Path, scene_model) -> None:
+    """Workers draw frames round robin; the video must not depend on how many there are,
+    nor on the workers having started (and the caller having waited) long before."""
+    import time
+
+    import imageio_ffmpeg
+
+    from quaddance.play import video
+
+    qpos = _dancing_qpos(scene_model, 1.0)
+    frames = {}
+    for workers in (1, 3):
+        renderer = video.VideoRenderer(scene_model, 160, 120, workers=workers)
+        with renderer:
+            time.sleep(0.5 * workers)  # the caller busy elsewhere while the workers start
+            out = tmp_path / f"w{workers}.mp4"
+            timing = renderer.render(qpos, SIM_FPS, out, progress=False)
+        assert timing["frames"] == 30 and timing["workers"] == workers
+        reader = imageio_ffmpeg.read_frames(str(out))
+        next(reader)
+        frames[workers] = np.stack([np.frombuffer(f, np.uint8).astype(int) for f in reader])
+    assert frames[1].shape == frames[3].shape == (30, 160 * 120 * 3)
+    # The same pictures in the same order (the encoder is deterministic for equal input).
+    assert np.abs(frames[1] - frames[3]).max() <= 2
+    # ... and the leg really moves, so a shuffled order would show.
+    assert np.abs(frames[1][0] - frames[1][15]).mean() > 0.5
+
+
 def test_failed_video_leaves_the_previous_one(tmp_path: Path, scene_model) -> None:
     from quaddance.play import video
 

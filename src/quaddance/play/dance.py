@@ -15,10 +15,11 @@ from typing import TYPE_CHECKING, Any
 from quaddance.dancefile import Dance, save_dance
 from quaddance.errors import InputFileError
 from quaddance.fileio import check_output_file, ensure_dir, write_json
-from quaddance.play.policy import OnnxPolicy, shipped_policy_path
 
 if TYPE_CHECKING:
+    from quaddance.play.policy import OnnxPolicy
     from quaddance.play.rollout import PinnedDynamics
+    from quaddance.play.video import VideoRenderer
 
 
 @dataclass
@@ -63,13 +64,35 @@ def run_dance(
     sim_progress: Callable[[int, int], None] | None = None,
     show_render_progress: bool = True,
 ) -> DanceOutputs:
-    """Run the whole pipeline; every output is written atomically into `job.out_dir`."""
+    """Run the whole pipeline; every output is written atomically into `job.out_dir`.
+
+    With video, the render workers are started first, before the heavy imports (torch,
+    librosa), so that their start-up (model, EGL context) overlaps the music analysis and
+    the simulation; feet.png is drawn while the video renders.
+    """
+    t_start = time.perf_counter()
+    if not job.video:
+        return _run_dance(job, None, t_start, status, sim_progress, show_render_progress)
+    from quaddance.play.video import VideoRenderer
+
+    with VideoRenderer(None, job.width, job.height) as renderer:
+        return _run_dance(job, renderer, t_start, status, sim_progress, show_render_progress)
+
+
+def _run_dance(
+    job: DanceJob,
+    renderer: VideoRenderer | None,
+    t_start: float,
+    status: Callable[[str], None],
+    sim_progress: Callable[[int, int], None] | None,
+    show_render_progress: bool,
+) -> DanceOutputs:
     from quaddance.pipeline import make_dance
     from quaddance.play.metrics import dance_metrics
     from quaddance.play.plots import plot_feet
+    from quaddance.play.policy import OnnxPolicy, shipped_policy_path
     from quaddance.play.rollout import rollout
 
-    t_start = time.perf_counter()
     for path in (job.song, job.motion):
         if path is not None and not Path(path).is_file():
             raise InputFileError(path, "no such file")
@@ -106,31 +129,34 @@ def run_dance(
     )
     timings["simulation_s"] = result.sim_wall_s
 
-    render_s = None
-    if job.video:
-        from quaddance.play.video import render_video
-
+    render = None
+    if renderer is not None:
         status("filming")
-        t0 = time.perf_counter()
         paths["video"] = out / "dance.mp4"
-        render_video(
-            None,
+        render = renderer.start(
             result.qpos,
             result.fps,
             paths["video"],
             audio_path=job.song,
-            width=job.width,
-            height=job.height,
             target_heights_m=result.targets_m if job.target_markers else None,
             progress=show_render_progress,
         )
-        render_s = time.perf_counter() - t0
-        timings["render_s"] = render_s
 
+    t0 = time.perf_counter()
     title = f"{Path(dance.source).name} - {policy_path.name}"
     paths["plot"] = plot_feet(
         out / "feet.png", result.time_s, result.targets_m, result.feet_m, dance.beats_s, title
     )
+    timings["plot_s"] = time.perf_counter() - t0
+    render_s = None
+    if render is not None:
+        video = render.wait()
+        render_s = video["total_s"]
+        timings["render_s"] = render_s
+        # Start-up of the render workers, from their spawn at the start; the wait for them
+        # after the simulation (0 when the start-up was fully hidden).
+        timings["render_workers_ready_s"] = video["workers_ready_s"]
+        timings["render_startup_wait_s"] = video["startup_wait_s"]
     metrics = dance_metrics(
         result.time_s,
         result.targets_m,

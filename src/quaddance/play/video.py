@@ -22,11 +22,13 @@ at this size and renders several times faster on llvmpipe.
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing as mp
 import os
 import queue as queue_module
 import subprocess
 import tempfile
+import threading
 import time
 import traceback
 from collections.abc import Callable, Sequence
@@ -107,20 +109,39 @@ def _default_model() -> mujoco.MjModel:
     return build_model(visual=True)
 
 
-def _quat_slices(model: mujoco.MjModel) -> list[slice]:
-    """qpos slices holding unit quaternions (free and ball joints)."""
-    out = []
-    for j in range(model.njnt):
-        adr = int(model.jnt_qposadr[j])
-        if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE:
-            out.append(slice(adr + 3, adr + 7))
-        elif model.jnt_type[j] == mujoco.mjtJoint.mjJNT_BALL:
-            out.append(slice(adr, adr + 4))
-    return out
+@dataclass(frozen=True)
+class QposLayout:
+    """What turning poses into frames needs to know of a model: a render worker reports it
+    for the model it built, so the caller never compiles the visual model itself."""
+
+    nq: int
+    #: (start, stop) qpos ranges holding unit quaternions (free and ball joints).
+    quat_ranges: tuple[tuple[int, int], ...]
+    #: qpos address of the first free joint (the base position); None: no free joint.
+    base_adr: int | None
+    #: ``model.stat.center``: the look-at point of a model without a free joint, m.
+    center: tuple[float, float, float]
+
+    @classmethod
+    def of(cls, model: mujoco.MjModel) -> QposLayout:
+        quats, base = [], None
+        for j in range(model.njnt):
+            adr = int(model.jnt_qposadr[j])
+            if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE:
+                quats.append((adr + 3, adr + 7))
+                base = adr if base is None else base
+            elif model.jnt_type[j] == mujoco.mjtJoint.mjJNT_BALL:
+                quats.append((adr, adr + 4))
+        center = tuple(float(c) for c in model.stat.center)
+        return cls(int(model.nq), tuple(quats), base, center)  # type: ignore[arg-type]
+
+
+def _layout(model: mujoco.MjModel | QposLayout) -> QposLayout:
+    return model if isinstance(model, QposLayout) else QposLayout.of(model)
 
 
 def resample_qpos(
-    model: mujoco.MjModel, qpos_s: np.ndarray, sim_fps: float, times_s: np.ndarray
+    model: mujoco.MjModel | QposLayout, qpos_s: np.ndarray, sim_fps: float, times_s: np.ndarray
 ) -> np.ndarray:
     """Poses at arbitrary times: linear interpolation, quaternions normalised (nlerp).
 
@@ -133,31 +154,32 @@ def resample_qpos(
     Returns:
         (N, nq) poses.
     """
+    quats = [slice(a, b) for a, b in _layout(model).quat_ranges]
     qpos = np.asarray(qpos_s, dtype=float)
     pos = np.clip(np.asarray(times_s, dtype=float) * sim_fps, 0.0, qpos.shape[0] - 1)
     i0 = np.floor(pos).astype(int)
     i1 = np.minimum(i0 + 1, qpos.shape[0] - 1)
     w = (pos - i0)[:, None]
     a, b = qpos[i0], qpos[i1].copy()
-    for sl in _quat_slices(model):
+    for sl in quats:
         # q and -q are the same rotation: interpolate along the shorter arc.
         flip = np.sum(a[:, sl] * b[:, sl], axis=1) < 0
         b[flip, sl] *= -1.0
     out = (1.0 - w) * a + w * b
-    for sl in _quat_slices(model):
+    for sl in quats:
         norm = np.linalg.norm(out[:, sl], axis=1, keepdims=True)
         out[:, sl] /= np.where(norm > 0, norm, 1.0)
     return out
 
 
 def follow_lookat(
-    model: mujoco.MjModel, qpos_frames: np.ndarray, fps: float, cfg: RenderCfg
+    model: mujoco.MjModel | QposLayout, qpos_frames: np.ndarray, fps: float, cfg: RenderCfg
 ) -> np.ndarray:
     """Smoothed look-at points of the follow camera, (N, 3) m, from the base position."""
-    free = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
-    if not free:
-        return np.tile(np.asarray(model.stat.center, dtype=float), (len(qpos_frames), 1))
-    adr = int(model.jnt_qposadr[free[0]])
+    layout = _layout(model)
+    if layout.base_adr is None:
+        return np.tile(np.asarray(layout.center, dtype=float), (len(qpos_frames), 1))
+    adr = layout.base_adr
     base = qpos_frames[:, adr : adr + 3] + np.asarray(cfg.lookat_offset_m)
     return gaussian_smooth(base, cfg.smooth_s * fps)
 
@@ -288,86 +310,83 @@ class FrameRenderer:
             scene.ngeom += 1
 
 
-@dataclass
-class _Job:
-    """One worker's share of the frames. Only paths and settings: the spawn start-up pipe
-    then carries a few kB, and a worker that dies while starting cannot block the caller
-    (CPython keeps writing a large payload into the pipe of a dead child)."""
+@dataclass(frozen=True)
+class _WorkerSpec:
+    """What a rendering process is started with. Only a path and settings: the spawn
+    start-up pipe then carries a few kB, and a worker that dies while starting cannot block
+    the caller (CPython keeps writing a large payload into the pipe of a dead child)."""
 
     worker: int
-    model_path: Path  # the model, saved by mj_saveModel
-    frames_path: Path  # .npz: qpos (n, nq), lookat (n, 3), optionally targets (n, 4)
+    n_workers: int
+    model_path: Path | None  # a model saved by mj_saveModel; None: build the dance scene
     width: int
     height: int
-    fps: float
     cfg: RenderCfg
-    segment: Path | None = None  # write an H.264 segment here ...
-    pngs: list[Path] | None = None  # ... or one PNG per frame here
 
 
-def _make_jobs(
-    tmp_dir: Path,
-    model: mujoco.MjModel,
-    qpos: np.ndarray,
-    lookat: np.ndarray,
-    targets: np.ndarray | None,
-    n_workers: int,
-    **job_args: Any,
-) -> list[_Job]:
-    """Split the frames into contiguous chunks, one per worker, saved under ``tmp_dir``."""
-    model_path = tmp_dir / "model.mjb"
-    mujoco.mj_saveModel(model, str(model_path), None)
-    jobs = []
-    chunks = [c for c in np.array_split(np.arange(len(qpos)), n_workers) if len(c)]
-    for i, chunk in enumerate(chunks):
-        arrays = {"qpos": qpos[chunk], "lookat": lookat[chunk]}
-        if targets is not None:
-            arrays["targets"] = targets[chunk]
-        frames_path = tmp_dir / f"frames{i:02d}.npz"
-        np.savez(frames_path, **arrays)
-        jobs.append(_Job(worker=i, model_path=model_path, frames_path=frames_path, **job_args))
-    return jobs
+#: Frames a worker may render ahead of the encoder (0.9 MB each at 640x480): slack for
+#: the workers' uneven speed without holding the song in memory.
+_FRAMES_AHEAD = 8
 
 
-def _worker(job: _Job, messages: Any) -> None:
-    """Entry point of a rendering process: render the job, report progress on ``messages``."""
+def _parent_alive() -> bool:
+    parent = mp.parent_process()
+    return parent is None or parent.is_alive()
+
+
+def _put(out: Any, item: tuple[str, Any]) -> None:
+    """Put on a bounded queue, giving up when the caller has died (nobody would read)."""
+    while True:
+        try:
+            out.put(item, timeout=1.0)
+            return
+        except queue_module.Full:
+            if not _parent_alive():
+                raise SystemExit(1) from None
+
+
+def _worker(spec: _WorkerSpec, jobs: Any, out: Any) -> None:
+    """Entry point of a rendering process.
+
+    Start-up (model, EGL context, a warm-up frame: llvmpipe compiles its shaders on the
+    first draw) happens at once, then the worker reports the model's `QposLayout` and waits
+    for its job: a .npz of all frames, of which it draws every ``n_workers``-th from frame
+    ``worker`` on, in order, putting each image on ``out`` (or writing PNGs).
+    """
     try:
-        import imageio_ffmpeg
-
+        if spec.model_path is not None:
+            model = mujoco.MjModel.from_binary_path(str(spec.model_path))
+        else:
+            model = _default_model()
+        layout = QposLayout.of(model)
+        frames = FrameRenderer(model, spec.width, spec.height, spec.cfg)
+        frames.render(model.qpos0)
+        # Wall-clock time (comparable across processes) and this process's CPU so far.
+        _put(out, ("ready", (layout, time.time(), time.process_time())))
+        while not jobs.poll(1.0):
+            if not _parent_alive():
+                return
+        job = jobs.recv()
+        if job is None:
+            return
+        frames_path, pngs = job
         start = time.perf_counter()
-        model = mujoco.MjModel.from_binary_path(str(job.model_path))
-        with np.load(job.frames_path) as arrays:
-            qpos, lookat = arrays["qpos"], arrays["lookat"]
-            targets = arrays.get("targets")
-        frames = FrameRenderer(model, job.width, job.height, job.cfg)
-        writer = None
-        if job.segment is not None:
-            writer = imageio_ffmpeg.write_frames(
-                str(job.segment),
-                (job.width, job.height),
-                fps=job.fps,
-                codec="libx264",
-                quality=None,
-                macro_block_size=2,
-                ffmpeg_log_level="error",
-                output_params=["-crf", str(job.cfg.crf), "-preset", job.cfg.preset],
-            )
-            writer.send(None)  # starts ffmpeg
-        reported = 0
+        mine = slice(spec.worker, None, spec.n_workers)
+        with np.load(frames_path) as arrays:
+            qpos, lookat = arrays["qpos"][mine], arrays["lookat"][mine]
+            targets = arrays["targets"][mine] if "targets" in arrays else None
         for k in range(len(qpos)):
             image = frames.render(qpos[k], lookat[k], None if targets is None else targets[k])
-            if writer is not None:
-                writer.send(np.ascontiguousarray(image))
-            elif job.pngs is not None:
-                _write_png(job.pngs[k], image)
-            if k + 1 - reported >= 5 or k + 1 == len(qpos):
-                messages.put(("progress", job.worker, k + 1 - reported))
-                reported = k + 1
-        if writer is not None:
-            writer.close()
-        messages.put(("done", job.worker, time.perf_counter() - start))
+            if pngs is not None:
+                _write_png(pngs[spec.worker + k * spec.n_workers], image)
+                _put(out, ("frame", None))
+            else:
+                _put(out, ("frame", np.ascontiguousarray(image)))
+        _put(out, ("done", time.perf_counter() - start))
+    except (EOFError, SystemExit):
+        return  # the caller went away
     except BaseException:
-        messages.put(("error", job.worker, traceback.format_exc()))
+        _put(out, ("error", traceback.format_exc()))
 
 
 def _write_png(path: Path, image: np.ndarray) -> None:
@@ -377,55 +396,328 @@ def _write_png(path: Path, image: np.ndarray) -> None:
         iio.imwrite(tmp, image, extension=".png")
 
 
-def _run_workers(jobs: Sequence[_Job], n_frames: int, progress: bool, label: str) -> float:
-    """Run one spawned process per job; returns the wall time, s. Raises RenderError."""
-    # The workers inherit this environment; MuJoCo reads MUJOCO_GL when they import it.
-    os.environ.setdefault("MUJOCO_GL", "egl")
-    ctx = mp.get_context("spawn")
-    messages = ctx.Queue()
-    procs = [ctx.Process(target=_worker, args=(job, messages), daemon=True) for job in jobs]
-    start = time.perf_counter()
-    bar = _Progress(progress, label, n_frames)
-    try:
-        for proc in procs:
-            proc.start()
-        finished: set[int] = set()
-        while len(finished) < len(procs):
+class VideoRenderer:
+    """Rendering processes started ahead of the poses they will draw.
+
+    Creating one spawns the workers at once; each builds (or loads) the model, makes its EGL
+    context and draws a warm-up frame while the caller goes on analysing the music and
+    simulating, so that start-up is off the critical path. `render` (or `start` + `wait`)
+    then hands all frames out, round robin, and pipes the images in order to one ffmpeg that
+    encodes H.264 and muxes the song as AAC in the same pass. One video per instance; use it
+    as a context manager (or call `close`) so the workers always end.
+    """
+
+    def __init__(
+        self,
+        model: ModelSource = None,
+        width: int = 640,
+        height: int = 480,
+        workers: int = 2,
+        cfg: RenderCfg | None = None,
+    ) -> None:
+        """
+        Args:
+            model: as in `render_video`; None (the dance scene) is built in the workers, not
+                here, so the caller does not wait for the compilation.
+            width, height: frame size in pixels (even).
+            workers: rendering processes; one per core is fastest.
+            cfg: look, camera and encoder settings.
+        """
+        _check_size(width, height, 1.0)
+        if workers < 1:
+            raise QuaddanceError(f"workers must be >= 1, got {workers}")
+        self.width, self.height, self.n_workers = width, height, workers
+        self.cfg = cfg or RenderCfg()
+        self._created = time.time()
+        self._ready_at: list[float] = []  # time.time() at which each worker was ready
+        self._startup_cpu_s: list[float] = []
+        self._tmp = tempfile.TemporaryDirectory(prefix="quaddance-video-")
+        self._tmp_dir = Path(self._tmp.name)
+        self._layout: QposLayout | None = None
+        model_path = None
+        if model is not None:
+            base = _load_model(model)
+            self._layout = QposLayout.of(base)
+            model_path = self._tmp_dir / "model.mjb"
+            mujoco.mj_saveModel(base, str(model_path), None)
+        self._cpu_before = _children_cpu_s()
+        self._used = False
+        self._ready: list[bool] = [False] * workers
+        self._jobs: list[Any] = []
+        self._outs: list[Any] = []
+        self._procs: list[Any] = []
+        # The workers inherit this environment; MuJoCo reads MUJOCO_GL when they import it.
+        os.environ.setdefault("MUJOCO_GL", "egl")
+        ctx = mp.get_context("spawn")
+        try:
+            for i in range(workers):
+                spec = _WorkerSpec(i, workers, model_path, width, height, self.cfg)
+                receive, send = ctx.Pipe(duplex=False)
+                out = ctx.Queue(maxsize=_FRAMES_AHEAD)
+                proc = ctx.Process(target=_worker, args=(spec, receive, out), daemon=True)
+                proc.start()
+                receive.close()  # the worker has its own copy
+                self._jobs.append(send)
+                self._outs.append(out)
+                self._procs.append(proc)
+        except BaseException:
+            self.close()
+            raise
+
+    def __enter__(self) -> VideoRenderer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Stop the workers (if still running) and remove the temporary files."""
+        for send, proc in zip(self._jobs, self._procs, strict=False):
+            if proc.is_alive():
+                with contextlib.suppress(OSError):  # it died meanwhile
+                    send.send(None)
+        for proc in self._procs:
+            proc.join(timeout=2.0)
+            if proc.is_alive():
+                proc.terminate()
+                proc.join(timeout=5.0)
+        for conn in self._jobs:
+            conn.close()
+        for out in self._outs:
+            out.cancel_join_thread()  # frames nobody will read must not block our exit
+            out.close()
+        self._jobs, self._outs, self._procs = [], [], []
+        self._tmp.cleanup()
+
+    # -- messages from the workers
+
+    def _receive(self, worker: int) -> tuple[str, Any]:
+        """The next message of one worker; raises RenderError if it failed or died."""
+        out, proc = self._outs[worker], self._procs[worker]
+        while True:
             try:
-                kind, worker, payload = messages.get(timeout=1.0)
+                kind, payload = out.get(timeout=1.0)
             except queue_module.Empty:
-                dead = [
-                    i for i, p in enumerate(procs) if i not in finished and p.exitcode is not None
-                ]
-                if dead:
+                if proc.exitcode is None:
+                    continue
+                try:  # its last words may still be in the pipe
+                    kind, payload = out.get(timeout=1.0)
+                except queue_module.Empty:
                     raise RenderError(
-                        f"render worker {dead[0]} exited with code {procs[dead[0]].exitcode} "
+                        f"render worker {worker} exited with code {proc.exitcode} "
                         "(see its output above; a calling script needs an "
                         "'if __name__ == \"__main__\":' guard; headless rendering needs EGL, "
                         f"Debian: {EGL_PACKAGES})"
                     ) from None
-                continue
-            if kind == "progress":
-                bar.advance(payload)
-            elif kind == "done":
-                finished.add(worker)
-            else:
+            if kind == "error":
                 last = payload.strip().splitlines()[-1] if payload.strip() else "unknown error"
                 raise RenderError(
                     f"rendering failed: {last} (headless rendering needs EGL; Debian: "
                     f"{EGL_PACKAGES})",
                     worker_traceback=payload,
                 )
-        for proc in procs:
-            proc.join()
-        return time.perf_counter() - start
-    finally:
-        bar.close()
-        for proc in procs:
-            if proc.is_alive():
-                proc.terminate()
-                proc.join(timeout=5)
-        messages.close()
+            return kind, payload
+
+    def _wait_ready(self, worker: int) -> None:
+        if not self._ready[worker]:
+            kind, (layout, ready_at, cpu_s) = self._receive(worker)
+            assert kind == "ready", kind
+            self._ready[worker] = True
+            self._layout = self._layout or layout
+            self._ready_at.append(ready_at)
+            self._startup_cpu_s.append(cpu_s)
+
+    def layout(self) -> QposLayout:
+        """The model's qpos layout (waits for the first worker if the model is built there)."""
+        if self._layout is None:
+            self._wait_ready(0)
+        assert self._layout is not None
+        return self._layout
+
+    def _hand_out(self, arrays: dict[str, np.ndarray], pngs: list[Path] | None) -> None:
+        """Give every worker the job; each draws its share of ``arrays`` (frames on axis 0)."""
+        if self._used:
+            raise QuaddanceError("a VideoRenderer renders one video; make a new one")
+        self._used = True
+        for i in range(self.n_workers):
+            self._wait_ready(i)
+        frames_path = self._tmp_dir / "frames.npz"
+        np.savez(frames_path, **arrays)
+        for send in self._jobs:
+            send.send((frames_path, pngs))
+
+    # -- the video
+
+    def render(
+        self,
+        qpos_s: np.ndarray,
+        sim_fps: float,
+        out_path: str | Path,
+        audio_path: str | Path | None = None,
+        audio_offset_s: float = 0.0,
+        fps: float = 30.0,
+        target_heights_m: np.ndarray | None = None,
+        progress: bool = True,
+    ) -> dict[str, Any]:
+        """Render the video and wait for it; the arguments and result are `render_video`'s."""
+        return self.start(
+            qpos_s, sim_fps, out_path, audio_path, audio_offset_s, fps, target_heights_m, progress
+        ).wait()
+
+    def start(
+        self,
+        qpos_s: np.ndarray,
+        sim_fps: float,
+        out_path: str | Path,
+        audio_path: str | Path | None = None,
+        audio_offset_s: float = 0.0,
+        fps: float = 30.0,
+        target_heights_m: np.ndarray | None = None,
+        progress: bool = True,
+    ) -> RenderTask:
+        """Start rendering in a background thread, so the caller can do other work (plot,
+        metrics) meanwhile; `RenderTask.wait` returns the timing or raises. Arguments are
+        checked here, before anything is rendered."""
+        total_start = time.perf_counter()
+        _check_size(self.width, self.height, fps)
+        if audio_offset_s < 0 or not np.isfinite(audio_offset_s):
+            raise QuaddanceError(f"audio_offset_s must be >= 0, got {audio_offset_s}")
+        audio = Path(audio_path) if audio_path is not None else None
+        if audio is not None:
+            _check_audio(audio)
+        layout = self.layout()
+        qpos = _check_poses(layout.nq, qpos_s, sim_fps, target_heights_m)
+        duration_s = qpos.shape[0] / sim_fps
+        n_frames = max(1, round(duration_s * fps))
+        times_s = np.arange(n_frames) / fps
+        frames_qpos = resample_qpos(layout, qpos, sim_fps, times_s)
+        arrays = {"qpos": frames_qpos, "lookat": follow_lookat(layout, frames_qpos, fps, self.cfg)}
+        if target_heights_m is not None:
+            src = np.asarray(target_heights_m, dtype=float)
+            # Step-hold, not interpolation: a marker shows the target of the sim step on screen.
+            arrays["targets"] = src[
+                np.minimum((times_s * sim_fps + 1e-9).astype(int), len(src) - 1)
+            ]
+        args = _encoder_args(
+            self.width, self.height, fps, n_frames, audio, audio_offset_s, self.cfg
+        )
+        task = RenderTask(self, arrays, args, Path(out_path), audio, n_frames, fps, progress)
+        task.total_start = total_start
+        task.begin()
+        return task
+
+    def _encode(self, task: RenderTask) -> dict[str, Any]:
+        """Hand the frames out and pipe them, in order, into ffmpeg (runs in the task thread)."""
+        wait_start = time.perf_counter()
+        self._hand_out(task.arrays, None)
+        render_start = time.perf_counter()
+        bar = _Progress(task.progress, "Rendering video", task.n_frames)
+        try:
+            with atomic_path(task.out_path) as tmp_out:
+                err_path = self._tmp_dir / "ffmpeg.log"
+                with open(err_path, "wb") as err:
+                    cmd = [_ffmpeg_exe(), "-hide_banner", "-y", *task.args, str(tmp_out)]
+                    proc = subprocess.Popen(
+                        cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=err
+                    )
+                try:
+                    assert proc.stdin is not None
+                    for k in range(task.n_frames):
+                        _, image = self._receive(k % self.n_workers)
+                        try:
+                            proc.stdin.write(memoryview(image).cast("B"))
+                        except BrokenPipeError:
+                            break  # ffmpeg stopped: its log says why
+                        bar.advance(1)
+                    frames_done = time.perf_counter()
+                    with contextlib.suppress(BrokenPipeError):
+                        proc.stdin.close()
+                    returncode = proc.wait()
+                except BaseException:
+                    proc.kill()
+                    proc.wait()
+                    raise
+                if returncode != 0:
+                    # The song was probed before: a failure here is the encoder's.
+                    log = err_path.read_text(errors="replace").strip()
+                    reason = log.splitlines()[-1] if log else f"exit code {returncode}"
+                    raise QuaddanceError(f"ffmpeg could not write {task.out_path} ({reason})")
+            encode_end = time.perf_counter()
+        finally:
+            bar.close()
+        for i in range(self.n_workers):
+            kind, _ = self._receive(i)
+            assert kind == "done", kind
+        for proc_ in self._procs:
+            proc_.join(timeout=5.0)
+        total_s = encode_end - task.total_start
+        video_s = task.n_frames / task.fps
+        return {
+            "frames": task.n_frames,
+            "fps": task.fps,
+            "width": self.width,
+            "height": self.height,
+            "workers": min(self.n_workers, task.n_frames),
+            "duration_s": video_s,
+            "startup_wait_s": render_start - wait_start,
+            "workers_ready_s": max(self._ready_at) - self._created,
+            "worker_startup_cpu_s": sum(self._startup_cpu_s),
+            "render_s": encode_end - render_start,
+            "worker_cpu_s": _children_cpu_s() - self._cpu_before,
+            "mux_s": encode_end - frames_done,
+            "total_s": total_s,
+            "frames_per_s": task.n_frames / total_s,
+            "realtime_factor": video_s / total_s,
+        }
+
+    def stills(self, arrays: dict[str, np.ndarray], pngs: list[Path]) -> None:
+        """Draw the frames in ``arrays`` as PNGs at ``pngs`` (one each) and wait for them."""
+        self._hand_out(arrays, pngs)
+        for k in range(len(pngs)):
+            self._receive(k % self.n_workers)
+        for i in range(self.n_workers):
+            self._receive(i)
+
+
+class RenderTask:
+    """A video being rendered by a `VideoRenderer` in a background thread."""
+
+    def __init__(
+        self,
+        renderer: VideoRenderer,
+        arrays: dict[str, np.ndarray],
+        args: list[str],
+        out_path: Path,
+        audio: Path | None,
+        n_frames: int,
+        fps: float,
+        progress: bool,
+    ) -> None:
+        self.renderer, self.arrays, self.args = renderer, arrays, args
+        self.out_path, self.audio, self.n_frames, self.fps = out_path, audio, n_frames, fps
+        self.progress = progress
+        self.total_start = time.perf_counter()
+        self._result: dict[str, Any] | None = None
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name="quaddance-video", daemon=True)
+
+    def begin(self) -> None:
+        self._thread.start()
+
+    def _run(self) -> None:
+        try:
+            self._result = self.renderer._encode(self)
+        except BaseException as err:  # handed to the caller by wait()
+            self._error = err
+
+    def wait(self) -> dict[str, Any]:
+        """Block until the video is written; returns its timing or raises the failure."""
+        while self._thread.is_alive():
+            self._thread.join(timeout=0.2)  # short joins keep Ctrl-C responsive
+        if self._error is not None:
+            raise self._error
+        assert self._result is not None
+        return self._result
 
 
 class _Progress:
@@ -476,11 +768,11 @@ def _load_model(model: ModelSource) -> mujoco.MjModel:
 
 
 def _check_poses(
-    model: mujoco.MjModel, qpos_s: np.ndarray, sim_fps: float, targets: np.ndarray | None
+    nq: int, qpos_s: np.ndarray, sim_fps: float, targets: np.ndarray | None
 ) -> np.ndarray:
     qpos = np.asarray(qpos_s, dtype=float)
-    if qpos.ndim != 2 or qpos.shape[1] != model.nq or qpos.shape[0] < 1:
-        raise QuaddanceError(f"qpos_s must be (T, {model.nq}) with T >= 1, got {qpos.shape}")
+    if qpos.ndim != 2 or qpos.shape[1] != nq or qpos.shape[0] < 1:
+        raise QuaddanceError(f"qpos_s must be (T, {nq}) with T >= 1, got {qpos.shape}")
     if not np.all(np.isfinite(qpos)):
         raise QuaddanceError("qpos_s contains NaN or inf")
     if not sim_fps > 0:
@@ -507,10 +799,14 @@ def _children_cpu_s() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
-def _ffmpeg(args: list[str]) -> subprocess.CompletedProcess[str]:
+def _ffmpeg_exe() -> str:
     import imageio_ffmpeg
 
-    cmd = [imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", "-nostdin", "-y", *args]
+    return imageio_ffmpeg.get_ffmpeg_exe()
+
+
+def _ffmpeg(args: list[str]) -> subprocess.CompletedProcess[str]:
+    cmd = [_ffmpeg_exe(), "-hide_banner", "-nostdin", "-y", *args]
     return subprocess.run(cmd, capture_output=True, text=True, check=False)
 
 
@@ -522,6 +818,29 @@ def _check_audio(audio_path: Path) -> None:
     if probe.returncode != 0:
         reason = probe.stderr.strip().splitlines()[-1] if probe.stderr.strip() else "unknown"
         raise InputFileError(audio_path, f"ffmpeg cannot decode this audio ({reason})")
+
+
+def _encoder_args(
+    width: int,
+    height: int,
+    fps: float,
+    n_frames: int,
+    audio: Path | None,
+    audio_offset_s: float,
+    cfg: RenderCfg,
+) -> list[str]:
+    """ffmpeg arguments (all but the output file): raw RGB frames on stdin -> H.264, the
+    song from ``audio_offset_s`` -> AAC, both cut at the last frame, moov atom first."""
+    args = ["-v", "error", "-f", "rawvideo", "-pix_fmt", "rgb24", "-s", f"{width}x{height}"]
+    args += ["-r", f"{fps:g}", "-i", "pipe:0"]
+    if audio is not None:
+        args += ["-ss", f"{audio_offset_s:.6f}", "-i", str(audio)]
+    args += ["-map", "0:v:0", "-c:v", "libx264", "-pix_fmt", "yuv420p"]
+    args += ["-crf", str(cfg.crf), "-preset", cfg.preset]
+    if audio is not None:
+        args += ["-map", "1:a:0?", "-c:a", "aac", "-b:a", cfg.audio_bitrate]
+    args += ["-t", f"{n_frames / fps:.6f}", "-movflags", "+faststart", "-f", "mp4"]
+    return args
 
 
 def render_video(
@@ -544,7 +863,8 @@ def render_video(
     The video lasts ``T / sim_fps`` seconds; frame k shows the pose at sim time k / fps
     (interpolated). The song is played from ``audio_offset_s`` into the file (the song time
     of sim time 0) and cut at the video's end. The output is written atomically: on any
-    failure an existing ``out_path`` is left as it was.
+    failure an existing ``out_path`` is left as it was. To overlap the workers' start-up
+    with other work, create a `VideoRenderer` early and call its `render` later instead.
 
     Args:
         model: the model, or a function that builds it, or None for the dance scene with
@@ -566,90 +886,34 @@ def render_video(
 
     Returns:
         Timing: ``frames``, ``fps``, ``width``, ``height``, ``workers``, ``duration_s`` (of the
-        video), ``render_s`` (wall time rendering and encoding the frames),
-        ``worker_cpu_s`` (CPU seconds of the workers and their encoders), ``mux_s``,
-        ``total_s``, ``frames_per_s`` (frames / total_s), ``realtime_factor``
-        (duration_s / total_s; above 1 is faster than real time).
+        video), ``startup_wait_s`` (waiting for the workers' start-up), ``workers_ready_s``
+        (their start-up, from creation, wall), ``worker_startup_cpu_s`` (its CPU seconds, all
+        workers), ``render_s`` (wall time rendering and encoding the
+        frames), ``worker_cpu_s`` (CPU seconds of the workers and the encoder), ``mux_s``
+        (encoder tail after the last frame), ``total_s``, ``frames_per_s`` (frames /
+        total_s), ``realtime_factor`` (duration_s / total_s; above 1 is faster than real time).
     """
-    total_start = time.perf_counter()
-    cfg = cfg or RenderCfg()
+    # Argument errors are reported before any process starts.
     _check_size(width, height, fps)
     if workers < 1:
         raise QuaddanceError(f"workers must be >= 1, got {workers}")
     if audio_offset_s < 0 or not np.isfinite(audio_offset_s):
         raise QuaddanceError(f"audio_offset_s must be >= 0, got {audio_offset_s}")
-    audio = Path(audio_path) if audio_path is not None else None
-    if audio is not None:
-        _check_audio(audio)
+    if audio_path is not None:
+        _check_audio(Path(audio_path))
     base_model = _load_model(model)
-    qpos = _check_poses(base_model, qpos_s, sim_fps, target_heights_m)
-
-    duration_s = qpos.shape[0] / sim_fps
-    n_frames = max(1, round(duration_s * fps))
-    times_s = np.arange(n_frames) / fps
-    frames_qpos = resample_qpos(base_model, qpos, sim_fps, times_s)
-    lookat = follow_lookat(base_model, frames_qpos, fps, cfg)
-    targets = None
-    if target_heights_m is not None:
-        src = np.asarray(target_heights_m, dtype=float)
-        # Step-hold, not interpolation: a marker shows the target of the sim step on screen.
-        targets = src[np.minimum((times_s * sim_fps + 1e-9).astype(int), len(src) - 1)]
-    out_path = Path(out_path)
-    with tempfile.TemporaryDirectory(prefix="quaddance-video-") as tmp_name:
-        tmp_dir = Path(tmp_name)
-        jobs = _make_jobs(
-            tmp_dir,
-            base_model,
-            frames_qpos,
-            lookat,
-            targets,
-            min(workers, n_frames),
-            width=width,
-            height=height,
+    _check_poses(base_model.nq, qpos_s, sim_fps, target_heights_m)
+    with VideoRenderer(base_model, width, height, workers, cfg) as renderer:
+        return renderer.render(
+            qpos_s,
+            sim_fps,
+            out_path,
+            audio_path=audio_path,
+            audio_offset_s=audio_offset_s,
             fps=fps,
-            cfg=cfg,
+            target_heights_m=target_heights_m,
+            progress=progress,
         )
-        for job in jobs:
-            job.segment = tmp_dir / f"segment{job.worker:02d}.mp4"
-        cpu_before = _children_cpu_s()
-        render_s = _run_workers(jobs, n_frames, progress, "Rendering video")
-        worker_cpu_s = _children_cpu_s() - cpu_before
-
-        mux_start = time.perf_counter()
-        concat_list = tmp_dir / "segments.txt"
-        concat_list.write_text("".join(f"file '{job.segment}'\n" for job in jobs))
-        args = ["-v", "error", "-f", "concat", "-safe", "0", "-i", str(concat_list)]
-        if audio is not None:
-            args += ["-ss", f"{audio_offset_s:.6f}", "-i", str(audio)]
-        args += ["-map", "0:v:0", "-c:v", "copy"]
-        if audio is not None:
-            args += ["-map", "1:a:0?", "-c:a", "aac", "-b:a", cfg.audio_bitrate]
-        args += ["-t", f"{n_frames / fps:.6f}", "-movflags", "+faststart"]
-        with atomic_path(out_path) as tmp_out:
-            result = _ffmpeg([*args, str(tmp_out)])
-            if result.returncode != 0:
-                reason = result.stderr.strip().splitlines()[-1] if result.stderr.strip() else ""
-                if audio is not None:
-                    raise InputFileError(audio, f"ffmpeg could not mux this audio ({reason})")
-                raise QuaddanceError(f"ffmpeg could not write {out_path} ({reason})")
-        mux_s = time.perf_counter() - mux_start
-
-    total_s = time.perf_counter() - total_start
-    video_s = n_frames / fps
-    return {
-        "frames": n_frames,
-        "fps": fps,
-        "width": width,
-        "height": height,
-        "workers": len(jobs),
-        "duration_s": video_s,
-        "render_s": render_s,
-        "worker_cpu_s": worker_cpu_s,
-        "mux_s": mux_s,
-        "total_s": total_s,
-        "frames_per_s": n_frames / total_s,
-        "realtime_factor": video_s / total_s,
-    }
 
 
 def write_frames_png(
@@ -676,39 +940,25 @@ def write_frames_png(
     cfg = cfg or RenderCfg()
     _check_size(width, height, 1.0)
     base_model = _load_model(model)
-    qpos = _check_poses(base_model, qpos_s, sim_fps, target_heights_m)
+    layout = QposLayout.of(base_model)
+    qpos = _check_poses(layout.nq, qpos_s, sim_fps, target_heights_m)
     times = np.asarray(times_s, dtype=float).reshape(-1)
     if len(times) == 0:
         return []
-    frames_qpos = resample_qpos(base_model, qpos, sim_fps, times)
+    frames_qpos = resample_qpos(layout, qpos, sim_fps, times)
     # The camera is smoothed over the whole trajectory, as in the video, then sampled.
     all_times = np.arange(max(1, round(qpos.shape[0] / sim_fps * 30.0))) / 30.0
-    path_lookat = follow_lookat(
-        base_model, resample_qpos(base_model, qpos, sim_fps, all_times), 30.0, cfg
-    )
+    path_lookat = follow_lookat(layout, resample_qpos(layout, qpos, sim_fps, all_times), 30.0, cfg)
     lookat = np.stack([np.interp(times, all_times, col) for col in path_lookat.T], axis=1)
-    targets = None
+    arrays = {"qpos": frames_qpos, "lookat": lookat}
     if target_heights_m is not None:
         src = np.asarray(target_heights_m, dtype=float)
-        targets = src[np.clip((times * sim_fps + 1e-9).astype(int), 0, len(src) - 1)]
+        arrays["targets"] = src[np.clip((times * sim_fps + 1e-9).astype(int), 0, len(src) - 1)]
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     pngs = [out_dir / f"frame_{i:03d}_{t:07.2f}s.png" for i, t in enumerate(times)]
-    with tempfile.TemporaryDirectory(prefix="quaddance-stills-") as tmp_name:
-        (job,) = _make_jobs(
-            Path(tmp_name),
-            base_model,
-            frames_qpos,
-            lookat,
-            targets,
-            1,
-            width=width,
-            height=height,
-            fps=30.0,
-            cfg=cfg,
-            pngs=pngs,
-        )
-        _run_workers([job], len(times), progress=False, label="Rendering stills")
+    with VideoRenderer(base_model, width, height, workers=1, cfg=cfg) as renderer:
+        renderer.stills(arrays, pngs)
     return pngs
 
 
