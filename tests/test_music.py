@@ -13,9 +13,11 @@ from typer.testing import CliRunner
 
 from quaddance.bench.beats import (
     BENCH_SONGS,
+    EXTRA_TUNING_SONGS,
     INSTALL_HINT,
     TICKS_PER_BEAT,
     beat_f_measure,
+    find_soundfont,
     metrical_level_f_measure,
     render_midi,
     write_midi,
@@ -121,6 +123,39 @@ def test_demo_song_beats_downbeats_and_section(demo_song: tuple[Path, object]) -
     # The loud second section is louder in the RMS envelope.
     cut = round(truth.section_change_s[0] * result.env_fps)
     assert result.rms_env[cut:].mean() > 1.5 * result.rms_env[:cut].mean()
+
+
+def _midi_song(name: str, tmp_path: Path) -> tuple[np.ndarray, np.ndarray, float]:
+    """(audio, beat times s, tempo BPM) of a benchmark MIDI song rendered with fluidsynth."""
+    if shutil.which("fluidsynth") is None:
+        pytest.skip(f"needs fluidsynth: {INSTALL_HINT}")
+    spec = next(s for s in (*BENCH_SONGS, *EXTRA_TUNING_SONGS) if s.name == name)
+    beats_s = write_midi(spec, tmp_path / "song.mid")
+    render_midi(tmp_path / "song.mid", tmp_path / "song.wav", find_soundfont(), SR)
+    y, _ = load_audio(tmp_path / "song.wav", sr=SR)
+    return y[: round((2 * beats_s[-1] - beats_s[-2]) * SR)], beats_s, spec.tempo_bpm
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        "tune_punk_156",  # kick on 1 and 3, snare on 2 and 4: half tempo would be 78 BPM
+        "ballad_70_intro",  # a true slow song with a backbeat must stay slow
+        "piano_72_arpeggio",  # an even stream of notes is no backbeat
+    ],
+)
+def test_tempo_octave_on_midi_songs(name: str, tmp_path: Path) -> None:
+    y, beats_s, tempo_bpm = _midi_song(name, tmp_path)
+    result = analyze(y, SR)
+    assert result.tempo_bpm == pytest.approx(tempo_bpm, rel=0.03)
+    assert beat_f_measure(beats_s, result.beats_s) >= 0.95
+
+
+def test_keys_on_the_off_beats_do_not_pull_the_beats(tmp_path: Path) -> None:
+    # Skanking keys on every off-beat, a syncopated bass, no drums: only the bass line's
+    # changes of pitch on beat 1 tell where the beat is.
+    y, beats_s, _ = _midi_song("tune_skank_100_nodrums", tmp_path)
+    assert beat_f_measure(beats_s, analyze(y, SR).beats_s) >= 0.9
 
 
 def test_silence_has_no_beats() -> None:

@@ -197,6 +197,25 @@ BENCH_SONGS: tuple[MidiSongSpec, ...] = (
 )
 
 
+# Songs added to the tuning set for the tempo-octave and beat-phase checks of the analyser
+# (backbeat rock heard at half tempo, keys that skank on the off-beats), with fast and slow
+# notations and a large tempo change; their before/after figures are part of the tuning set's.
+EXTRA_TUNING_SONGS: tuple[MidiSongSpec, ...] = (
+    MidiSongSpec("tune_rock_152", 152, "rock", "eighths", "eighths", 29, 34, 31),
+    MidiSongSpec("tune_disco_146", 146, "disco", "quarters", "quarters", 30, 33, 32),
+    MidiSongSpec("tune_punk_156", 156, "punk", "sustain", "eighths", 27, 34, 33),
+    MidiSongSpec("tune_skank_100_nodrums", 100, "none", "offbeats", "syncopated", 16, 33, 34),
+    MidiSongSpec("tune_latin_108", 108, "latin", "syncopated", "syncopated", 0, 32, 35),
+    MidiSongSpec("tune_dnb_176", 176, "dnb", "sustain", "syncopated", 89, 38, 36),
+    MidiSongSpec("tune_ballad_56", 56, "ballad", "arpeggio", "half", 0, 32, 37, duration_s=32.0),
+    MidiSongSpec(
+        "tune_pop_96_to_150", 96, "rock", "quarters", "eighths", 0, 33, 38, tempo_change=(4, 150.0)
+    ),
+    MidiSongSpec("tune_hiphop_64", 64, "hiphop", "sustain", "syncopated", 4, 38, 39),
+    MidiSongSpec("tune_house_120", 120, "house", "offbeats", "offbeats", 17, 38, 40),
+)
+
+
 # The untuned set, fixed (names, tempi, styles, seeds) on 2026-12-01 before any tuning of the
 # analyser against it; never tune on it. Kinds: fast notations (170-200 BPM), slow notations
 # (40-70 BPM, often with sixteenth-note hats), tempo changes, drums or keys that do not mark the
@@ -509,9 +528,9 @@ def madmom_beats_s(python: str | Path, wav_paths: list[Path]) -> dict[str, np.nd
 
 
 SETS = ("tuning", "random", "untuned")
-"""Song sets: ``tuning`` = the designed MIDI songs + ``SYNTH_SONGS`` (the analyser's settings
-were tuned on them); ``random`` = ``random_midi_songs`` (not tuned on); ``untuned`` =
-``UNTUNED_SONGS`` (fixed before tuning, never tuned on)."""
+"""Song sets: ``tuning`` = ``BENCH_SONGS`` + ``EXTRA_TUNING_SONGS`` + ``SYNTH_SONGS`` (the
+analyser's settings were tuned on them); ``random`` = ``random_midi_songs`` (not tuned on);
+``untuned`` = ``UNTUNED_SONGS`` (fixed before tuning, never tuned on)."""
 
 
 @dataclass
@@ -590,7 +609,7 @@ def bench_songs(
     soundfont = find_soundfont()
     specs: list[tuple[MidiSongSpec, str]] = []
     if "tuning" in sets:
-        specs += [(spec, "tuning") for spec in BENCH_SONGS]
+        specs += [(spec, "tuning") for spec in (*BENCH_SONGS, *EXTRA_TUNING_SONGS)]
     if "random" in sets:
         specs += [(spec, "random") for spec in random_midi_songs(n_random)]
     if "untuned" in sets:
@@ -727,7 +746,8 @@ def run_beat_bench(
             "half tempo reference)"
         ),
         "sets": {
-            "tuning": "designed MIDI songs + music.synth songs: the analyser was tuned on these",
+            "tuning": "designed MIDI songs (BENCH_SONGS + EXTRA_TUNING_SONGS) and music.synth "
+            "songs: the analyser was tuned on these",
             "random": f"{n_random} random MIDI songs (seed 99): not tuned on",
             "untuned": "UNTUNED_SONGS: fast/slow notations, tempo changes, drums off the beat, "
             "140-160 BPM rock; fixed before tuning, never tuned on",

@@ -77,6 +77,19 @@ class AnalysisConfig:
     """Cost of a sudden tempo change, in units of one 0.25 s step of clear evidence (tuned)."""
     tempo_deviation_cost: float = 2.0
     """Cost of local tempo deviating from the global tempo, per squared octave (tuned)."""
+    bass_chroma_max_hz: float = 300.0
+    """Upper edge of the bass-line chroma, Hz (bass fundamentals; chords lie above)."""
+    offbeat_harmony_ratio: float = 2.0
+    """Beats move by half a beat when the bass line changes pitch this many times more at the
+    midpoints between them than at the beats (tuned)."""
+    backbeat_ratio: float = 0.75
+    """Tempo doubles when the midpoints between beats carry hits this strong relative to the
+    beats (a snare backbeat heard at half tempo; tuned)."""
+    backbeat_contrast: float = 1.5
+    """... and at least this much stronger than the quarter-beat positions, so that a steady
+    stream of notes (an arpeggio) does not count as a backbeat (tuned)."""
+    max_doubled_bpm: float = 165.0
+    """Doubling stops here: the top of the dance range 80-160 BPM plus a margin."""
     tightness: float = 300.0
     """Penalty on beat intervals off the local period (librosa's 100 is looser; our local
     tempo curve already follows tempo changes; tuned)."""
@@ -183,7 +196,9 @@ class _Features:
     low_onset: np.ndarray  # (n,) kick/bass band flux, dB
     raw_onset: np.ndarray  # (n,) full-band flux, dB
     rms: np.ndarray  # (n,) linear RMS
+    hit_onset: np.ndarray  # (n,) full-band log1p flux: loud hits count more than soft notes
     chroma: np.ndarray  # (12, n)
+    bass_chroma: np.ndarray  # (12, n) chroma of 30-300 Hz: the bass line's pitch
     fps: float
 
 
@@ -243,7 +258,12 @@ def _features(y: np.ndarray, sr: int, cfg: AnalysisConfig) -> _Features:
     # tuning=0 assumes A440: estimating the tuning costs a third of the analysis time and
     # chroma only needs to tell chords apart.
     chroma = librosa.feature.chroma_stft(S=power, sr=sr, n_fft=cfg.n_fft, tuning=0.0)
-    return _Features(tempo_onset, beat_onset, low_onset, raw, rms, chroma, fps)
+    freqs_hz = librosa.fft_frequencies(sr=sr, n_fft=cfg.n_fft)
+    bass = (freqs_hz >= 30.0) & (freqs_hz <= cfg.bass_chroma_max_hz)
+    chroma_fb = librosa.filters.chroma(sr=sr, n_fft=cfg.n_fft, tuning=0.0)
+    bass_chroma = chroma_fb[:, bass] @ power[bass]
+    hit = flux_log.mean(axis=0)
+    return _Features(tempo_onset, beat_onset, low_onset, raw, rms, hit, chroma, bass_chroma, fps)
 
 
 # --- tempo ------------------------------------------------------------------------------------
@@ -408,6 +428,65 @@ def _swing_shift(beat_frames: np.ndarray, onset: np.ndarray) -> float:
     return 0.0
 
 
+def _chroma_change(chroma: np.ndarray, at: np.ndarray, half_width: np.ndarray) -> np.ndarray:
+    """(m,) cosine distance between the mean chroma just before and just after each frame.
+
+    Args:
+        chroma: (12, n) chroma frames.
+        at: (m,) frames (fractional) to measure at.
+        half_width: (m,) frames averaged on each side.
+    """
+    n = chroma.shape[1]
+    cum = np.concatenate([np.zeros((12, 1)), np.cumsum(chroma, axis=1)], axis=1)
+    mid = np.clip(np.round(at).astype(int), 1, n - 1)
+    lo = np.clip(np.round(at - half_width).astype(int), 0, mid - 1)
+    hi = np.clip(np.round(at + half_width).astype(int), mid + 1, n)
+    before = (cum[:, mid] - cum[:, lo]) / (mid - lo)
+    after = (cum[:, hi] - cum[:, mid]) / (hi - mid)
+    norms = np.linalg.norm(before, axis=0) * np.linalg.norm(after, axis=0)
+    return 1.0 - np.sum(before * after, axis=0) / (norms + 1e-12)
+
+
+def _offbeat_harmony(beat_frames: np.ndarray, feats: _Features, cfg: AnalysisConfig) -> bool:
+    """True when the beats sit on the off-beats: the bass line changes pitch at the midpoints
+    between them far more often than at them.
+
+    Bass notes change with the harmony, and harmony changes on the beat (mostly on beat 1);
+    drums or keys that hit the off-beats (offbeat hats, skanks, pushes) can pull the tracker
+    half a beat off, but they do not move where the chords change.
+    """
+    if len(beat_frames) < 8:
+        return False
+    starts = beat_frames[:-1].astype(float)
+    half = 0.5 * np.diff(beat_frames)
+    on = _chroma_change(feats.bass_chroma, starts, half).mean()
+    mid = _chroma_change(feats.bass_chroma, starts + half, half).mean()
+    return bool(mid > cfg.offbeat_harmony_ratio * on and mid > 0.05)
+
+
+def _backbeat_double(beat_frames: np.ndarray, feats: _Features, cfg: AnalysisConfig) -> bool:
+    """True when the tempo should double: the midpoints between beats carry hits about as
+    strong as the beats, and clearly stronger than the quarter-beat positions.
+
+    That is the snare backbeat of rock heard at half tempo (kick on our beats, snare halfway):
+    the true beat is twice as fast. Only done while the doubled tempo stays in the dance range.
+    """
+    if len(beat_frames) < 8:
+        return False
+    period = float(np.median(np.diff(beat_frames)))
+    if 60.0 * feats.fps / period * 2.0 > cfg.max_doubled_bpm:
+        return False
+    import scipy.ndimage
+
+    # A hit may land a frame off the interpolated position: take the local maximum.
+    hit = scipy.ndimage.maximum_filter1d(feats.hit_onset, size=3)
+    fractions = np.array([0.0, 0.25, 0.5, 0.75])
+    starts = beat_frames[:-1].astype(float)
+    pos = starts[:, None] + fractions[None, :] * np.diff(beat_frames)[:, None]
+    beat, q1, mid, q3 = np.interp(pos, np.arange(len(hit)), hit).mean(axis=0)
+    return bool(mid >= cfg.backbeat_ratio * beat and mid >= cfg.backbeat_contrast * max(q1, q3))
+
+
 def _refine(beats: np.ndarray, onset: np.ndarray, radius: int = 1) -> np.ndarray:
     """Sub-frame beat positions: parabolic peak of the onset envelope near each beat frame."""
     out = beats.astype(float)
@@ -536,6 +615,13 @@ def analyze(y: np.ndarray, sr: int, cfg: AnalysisConfig | None = None) -> Analys
         intervals = np.diff(beat_frames, append=2 * beat_frames[-1] - beat_frames[-2])
         beat_frames = np.round(beat_frames + shift * intervals).astype(int)
         beat_frames = beat_frames[beat_frames < len(feats.beat_onset)]
+    if _offbeat_harmony(beat_frames, feats, cfg):
+        intervals = np.diff(beat_frames, append=2 * beat_frames[-1] - beat_frames[-2])
+        beat_frames = np.round(beat_frames + 0.5 * intervals).astype(int)
+        beat_frames = beat_frames[beat_frames < len(feats.beat_onset)]
+    if _backbeat_double(beat_frames, feats, cfg):
+        midpoints = np.round(0.5 * (beat_frames[1:] + beat_frames[:-1])).astype(int)
+        beat_frames = np.sort(np.concatenate([beat_frames, midpoints]))
     beat_pos = _refine(beat_frames, feats.beat_onset)
     beats_s = beat_pos / fps
     phase = _downbeat_phase(beat_frames, feats)
