@@ -164,6 +164,7 @@ def run_batch(
     memory_bytes: int = DEFAULT_MEMORY_BYTES,
     sentinel: str | Path | None = None,
     kwargs: dict[str, Any] | None = None,
+    warnings_as_errors: bool = False,
 ) -> list[Outcome]:
     """Call ``target(*case, **kwargs)`` for every case in child processes; classify each.
 
@@ -186,6 +187,9 @@ def run_batch(
         ``code_ran`` (the file is then removed so later cases are judged on their own).
     kwargs : dict, optional
         JSON-serialisable keyword arguments for every call.
+    warnings_as_errors : bool
+        Turn Python warnings into exceptions (then ``traceback``): a warning is a second
+        line on the user's terminal.
 
     Returns
     -------
@@ -198,6 +202,7 @@ def run_batch(
         "memory_bytes": int(memory_bytes),
         "sentinel": None if sentinel is None else str(sentinel),
         "sys_path": [str(_HERE)],
+        "warnings_as_errors": warnings_as_errors,
     }
     outcomes: list[Outcome] = []
     start = 0
@@ -347,6 +352,10 @@ def _child_main() -> None:
     from quaddance.errors import QuaddanceError
 
     sentinel = Path(spec["sentinel"]) if spec["sentinel"] else None
+    if spec["warnings_as_errors"]:
+        import warnings
+
+        warnings.simplefilter("error")
     answers.write(json.dumps({"ready": True}) + "\n")
     for args in spec["cases"]:
         named = args[0] if spec["mode"] == "reader" and args else None
@@ -356,7 +365,7 @@ def _child_main() -> None:
         except QuaddanceError as err:
             message = str(err)
             problem = message_problem(message, named)
-            kind, detail = (REFUSED, message[:300]) if problem is None else (BAD_MESSAGE, problem)
+            kind, detail = (REFUSED, message) if problem is None else (BAD_MESSAGE, problem)
         except MemoryError:
             kind, detail = KILLED, "MemoryError under the address-space limit"
         except BaseException as err:  # every other exception is the finding

@@ -38,7 +38,7 @@ MAX_ABS_VALUE = 1e7  # any OFFSET or channel value: 10 km in mm, or 27 000 turns
 MIN_FRAME_TIME_S = 1e-3  # 1000 fps: faster than any motion capture system
 MAX_FRAME_TIME_S = 1.0  # 1 fps: slower cannot carry a dance
 _FK_CHUNK_FRAMES = 4096  # frames per forward-kinematics step, bounds its temporary memory
-_ASCII_INT = re.compile(r"[0-9]{1,9}")
+_ASCII_INT = re.compile(r"[0-9]{1,12}")
 _ASCII_FLOAT = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]{1,3})?")
 
 

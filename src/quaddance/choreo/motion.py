@@ -130,7 +130,9 @@ def up_axis_of(positions: np.ndarray, root: int, ankles: tuple[int, int]) -> tup
 
 def _listing(names: list[str]) -> str:
     """Names joined for an error message, cut to `_MAX_MESSAGE_LIST` characters."""
-    text = ", ".join(name[:30] for name in names[:20]) or "none"
+    # Non-printable characters (newlines in a pickle's keys) would break the one-line error.
+    shown = ["".join(c if c.isprintable() else "?" for c in name[:30]) for name in names[:20]]
+    text = ", ".join(shown) or "none"
     cut = len(names) > 20 or len(text) > _MAX_MESSAGE_LIST
     return text[:_MAX_MESSAGE_LIST] + (" ..." if cut else "")
 
@@ -168,8 +170,10 @@ def _array(
             path, f"'{key}' is not a numeric array (or has more than {limit} numbers)"
         )
     try:
-        value = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
+        # Quietly: a warning would be a second line on the terminal; the checks below speak.
+        with np.errstate(all="ignore"):
+            value = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
         raise InputFileError(path, f"'{key}' is not a numeric array") from None
     if value.ndim != len(shape) or any(
         want is not None and got != want for got, want in zip(value.shape, shape, strict=True)

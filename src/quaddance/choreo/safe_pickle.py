@@ -108,15 +108,15 @@ def _as_dtype(value: object) -> np.dtype:
 def _checked_shape(shape: object) -> tuple[int, ...]:
     """``shape`` as a tuple of non-negative ints whose product is within the limits."""
     if not isinstance(shape, tuple) or len(shape) > MAX_ARRAY_NDIM:
-        raise _Refused(f"array shape {str(shape)[:60]} is not a tuple of <= {MAX_ARRAY_NDIM} ints")
+        raise _Refused(f"array shape {repr(shape)[:60]} is not a tuple of <= {MAX_ARRAY_NDIM} ints")
     count = 1
     for dim in shape:
         if type(dim) is not int or dim < 0:
-            raise _Refused(f"array shape {str(shape)[:60]} has a dimension that is not a size")
+            raise _Refused(f"array shape {repr(shape)[:60]} has a dimension that is not a size")
         count *= dim
         if count > MAX_ARRAY_ELEMENTS:
             raise _Refused(
-                f"array of shape {str(shape)[:60]} exceeds {MAX_ARRAY_ELEMENTS} elements"
+                f"array of shape {repr(shape)[:60]} exceeds {MAX_ARRAY_ELEMENTS} elements"
             )
     return shape
 
@@ -164,7 +164,7 @@ class _ArraySpec:
             raise _Refused("array state is not (version, shape, dtype, fortran, data)")
         shape, dtype, fortran, raw = state[-4:]
         if len(state) == 5 and state[0] != 1:
-            raise _Refused(f"array state version {str(state[0])[:20]} is not 1")
+            raise _Refused(f"array state version {repr(state[0])[:20]} is not 1")
         if not isinstance(fortran, bool | int):
             raise _Refused("array state's order flag is not a bool")
         self.array = _array_from(
@@ -285,7 +285,8 @@ def _check_global(module: str, name: str) -> Any:
     if found is None and (_canonical_module(module), name) == ("builtins", "complex"):
         raise _Refused("pickle holds a complex number (motion data is real-valued)")
     if found is None:
-        shown = f"{_canonical_module(module)}.{name}"[:100]
+        # Escaped: a name from the file may hold newlines, and the error must stay one line.
+        shown = repr(f"{_canonical_module(module)}.{name}"[:100])[1:-1]
         raise _Refused(f"pickle references {shown}, which could run code")
     return found
 
@@ -612,11 +613,18 @@ def safe_load_pickle(path: str | Path) -> object:
     if len(raw) > MAX_PICKLE_BYTES:
         raise InputFileError(path, f"is larger than {MAX_PICKLE_BYTES >> 20} MB, too big a motion")
     try:
-        scan_pickle(raw)
+        try:
+            scan_pickle(raw)
+        except ValueError as err:
+            if "Exceeds the limit" in str(err):  # int("9" * 5000) in a LONG opcode
+                raise _Refused(
+                    f"pickle holds an integer of more than {MAX_INT_BITS} bits"
+                ) from None
+            raise
         loaded = _RestrictedUnpickler(io.BytesIO(raw)).load()
         return _rebuild(loaded)
     except _Refused as err:
-        raise InputFileError(path, f"refused: {err}") from None
+        raise InputFileError(path, "refused: " + re.sub(r"\s+", " ", str(err))) from None
     except RecursionError:
         raise InputFileError(path, f"refused: containers nest deeper than {MAX_DEPTH}") from None
     except MemoryError:
