@@ -586,50 +586,30 @@ def bench_dance_cmd(
     out: Annotated[Path, typer.Option("--out", "-o", help="JSON results.")] = Path(
         "benchmarks/results/dance.json"
     ),
+    repeats: Annotated[int, typer.Option(help="Timed runs per song (median and min).")] = 3,
+    warmup: Annotated[bool, typer.Option(help="One untimed run first.")] = True,
     policy: Annotated[Path | None, typer.Option(help="Policy .onnx; default: shipped.")] = None,
 ) -> None:
-    """Time `dance` on the demo song with and without video; writes a JSON file."""
-    import tempfile
+    """Time the whole `dance` command (video on) on a 12 s and a 30 s song; writes JSON.
 
+    Each run is a fresh process timed from outside; ratio = wall / song length (goal <= 1).
+    CPU time of the process tree and the load average are recorded beside the wall time.
+    """
     from rich.console import Console
 
-    from quaddance.fileio import write_json
-    from quaddance.music.synth import write_demo_song
-    from quaddance.play.dance import DanceJob, run_dance
+    from quaddance.bench.dance import run_dance_bench
 
-    results = {}
-    with tempfile.TemporaryDirectory() as tmp, Console(stderr=True).status("timing dance..."):
-        song = Path(tmp) / "demo.wav"
-        write_demo_song(song)
-        for video in (False, True):
-            job = DanceJob(out_dir=Path(tmp) / str(video), song=song, policy=policy, video=video)
-            r = run_dance(job, show_render_progress=False)
-            key = "with_video" if video else "no_video"
-            results[key] = {
-                "song_s": r.metrics["duration_s"],
-                **r.metrics["timings_s"],
-                "realtime_factor_sim": r.metrics["realtime_factor_sim"],
-                "realtime_factor_render": r.metrics["realtime_factor_render"],
-                "total_over_song": r.timings_s["total_s"] / r.metrics["duration_s"],
-            }
-        # The whole command as a user runs it: a fresh process, imports and all.
-        import subprocess
-        import time
-
-        start = time.perf_counter()
-        cmd = [sys.executable, "-m", "quaddance.cli", "dance", "--demo", "--out", tmp + "/cli"]
-        if policy is not None:
-            cmd += ["--policy", str(policy)]
-        subprocess.run(cmd, check=True, capture_output=True)
-        wall_s = time.perf_counter() - start
-        song_s = results["with_video"]["song_s"]
-        results["cli_with_video"] = {
-            "song_s": song_s,
-            "wall_s": wall_s,
-            "wall_over_song": wall_s / song_s,
-        }
-    write_json(out, results)
-    print(results)
+    console = Console(stderr=True)
+    results = run_dance_bench(
+        out, repeats=repeats, warmup=warmup, policy=policy, progress=console.log
+    )
+    for song in results["songs"]:
+        print(
+            f"{song['song_s']:g} s song: wall median {song['wall_median_s']:.1f} s "
+            f"({song['ratio_median']:.2f}x), min {song['wall_min_s']:.1f} s "
+            f"({song['ratio_min']:.2f}x); CPU {song['cpu_median_s']:.1f} s; "
+            f"load {song['load_1min_median']:.1f}"
+        )
     print(f"-> {out}")
 
 

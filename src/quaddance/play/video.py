@@ -6,13 +6,15 @@ used: it crashed in processes that had imported torch.
 
 Rendering always runs in worker processes started with the 'spawn' method, never in the
 caller: MuJoCo picks its GL backend once, when it is first imported, so only a fresh process
-whose environment says ``MUJOCO_GL=egl`` is sure to get EGL. The frames are split into
-contiguous chunks, one per worker; each worker pipes its frames to its own ffmpeg (from
-imageio-ffmpeg) as an H.264 segment; the segments are then joined without re-encoding and the
-song is muxed in as AAC, trimmed to the video. Frame k shows sim time k / fps, and the song
-starts at ``audio_offset_s`` into the file, so sound and motion stay in sync. A script that
-calls `render_video` needs the usual ``if __name__ == "__main__":`` guard, because 'spawn'
-re-imports the main module in each worker (a worker that dies that way is reported).
+whose environment says ``MUJOCO_GL=egl`` is sure to get EGL. `VideoRenderer` starts the
+workers before the poses exist (``dance`` creates it before the music analysis), so their
+start-up (model, EGL context, a warm-up frame) overlaps the caller's work. The workers then
+draw the frames round robin and the caller pipes them, in order, into one ffmpeg (from
+imageio-ffmpeg) that encodes H.264 and muxes the song as AAC, trimmed to the video, in the
+same pass. Frame k shows sim time k / fps, and the song starts at ``audio_offset_s`` into the
+file, so sound and motion stay in sync. A script that renders needs the usual ``if __name__
+== "__main__":`` guard, because 'spawn' re-imports the main module in each worker (a worker
+that dies that way is reported).
 
 What makes it fast enough (640x480 on 2 cores, see `bench_render`): shadows, reflections and
 multisampling are off, and the Go1's 206 k-triangle visual meshes are simplified in the
@@ -442,6 +444,8 @@ class VideoRenderer:
             mujoco.mj_saveModel(base, str(model_path), None)
         self._cpu_before = _children_cpu_s()
         self._used = False
+        self._task: RenderTask | None = None
+        self._encoder: subprocess.Popen[bytes] | None = None
         self._ready: list[bool] = [False] * workers
         self._jobs: list[Any] = []
         self._outs: list[Any] = []
@@ -471,16 +475,26 @@ class VideoRenderer:
         self.close()
 
     def close(self) -> None:
-        """Stop the workers (if still running) and remove the temporary files."""
+        """Stop the workers (if still running) and remove the temporary files.
+
+        Also after an interrupt mid-video: the encoder is stopped first, so that the render
+        thread unwinds and removes its temporary output before we return.
+        """
+        task_running = self._task is not None and self._task.running()
+        if task_running and self._encoder is not None and self._encoder.poll() is None:
+            self._encoder.kill()
         for send, proc in zip(self._jobs, self._procs, strict=False):
             if proc.is_alive():
                 with contextlib.suppress(OSError):  # it died meanwhile
                     send.send(None)
         for proc in self._procs:
-            proc.join(timeout=2.0)
+            # A worker with no job (an error before rendering) need not finish starting up.
+            proc.join(timeout=2.0 if self._used and not task_running else 0.1)
             if proc.is_alive():
                 proc.terminate()
                 proc.join(timeout=5.0)
+        if self._task is not None:
+            self._task.join(timeout=10.0)
         for conn in self._jobs:
             conn.close()
         for out in self._outs:
@@ -603,6 +617,7 @@ class VideoRenderer:
         )
         task = RenderTask(self, arrays, args, Path(out_path), audio, n_frames, fps, progress)
         task.total_start = total_start
+        self._task = task
         task.begin()
         return task
 
@@ -620,6 +635,7 @@ class VideoRenderer:
                     proc = subprocess.Popen(
                         cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=err
                     )
+                    self._encoder = proc
                 try:
                     assert proc.stdin is not None
                     for k in range(task.n_frames):
@@ -703,6 +719,12 @@ class RenderTask:
 
     def begin(self) -> None:
         self._thread.start()
+
+    def running(self) -> bool:
+        return self._thread.is_alive()
+
+    def join(self, timeout: float) -> None:
+        self._thread.join(timeout)
 
     def _run(self) -> None:
         try:
