@@ -372,6 +372,68 @@ def dance_cmd(
     console.print(f"took {result.timings_s['total_s']:.1f} s")
 
 
+@app.command("deploy")
+def deploy_cmd(
+    song: Annotated[
+        Path | None, typer.Argument(help="Audio file (or --demo, --dance, --motion).")
+    ] = None,
+    demo: Annotated[bool, typer.Option(help="Dance to the built-in demo song.")] = False,
+    dance: Annotated[
+        Path | None, typer.Option("--dance", help="A dance.npz (quaddance choreograph).")
+    ] = None,
+    motion: Annotated[
+        Path | None, typer.Option(help="Human motion (EDGE/AIST++ .pkl, .bvh) to dance.")
+    ] = None,
+    robot: Annotated[
+        str, typer.Option(help="sim (a simulated Go1 in another process) or go1 (a real one).")
+    ] = "sim",
+    policy: Annotated[
+        Path | None, typer.Option(help="Policy .onnx (its .json beside it); default: shipped.")
+    ] = None,
+    seconds: Annotated[
+        float | None,
+        typer.Option(help="Dance at most this long, s.", callback=finite_in(0.02, 3600.0)),
+    ] = None,
+    auto_start: Annotated[
+        bool, typer.Option("--auto-start", help="Dance once standing, without waiting for Enter.")
+    ] = False,
+    inject: Annotated[
+        list[str] | None,
+        typer.Option(help="Fault at dance time T, s (sim only): push@T, freeze@T, nan@T, lag@T."),
+    ] = None,
+    out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")] = Path("deploy_out"),
+    robot_ip: Annotated[str, typer.Option(help="go1: the robot's low-level IP.")] = (
+        "192.168.123.10"
+    ),
+    power_level: Annotated[
+        int, typer.Option(help="go1: SDK PowerProtect level, 1 (10 %) to 10.", min=1, max=10)
+    ] = 1,
+) -> None:
+    """Run the dance on a robot: passive -> soft stand -> ready -> dance -> done, with a safety
+    layer (damping on a fall, a stale or NaN state, Ctrl-C); writes deploy.json and log.npz."""
+    from rich.console import Console
+
+    from quaddance.deploy.job import DeployJob, parse_inject, run_deploy
+
+    console = Console(stderr=True)
+    job = DeployJob(
+        out_dir=out, robot=robot, song=song, motion=motion, dance=dance, demo=demo,
+        policy=policy, seconds=seconds, auto_start=auto_start, inject=parse_inject(inject),
+        robot_ip=robot_ip, power_level=power_level,
+    )
+    summary, paths = run_deploy(job, status=lambda msg: console.log(msg))
+    front = summary["front"] or {}
+    mae = [front[f]["mae_m"] for f in ("fl", "fr") if f in front and front[f]["mae_m"] is not None]
+    console.print(
+        f"final state {summary['final_state']}, danced {summary['duration_s']:.1f} s, "
+        f"falls {summary['falls']}, front MAE "
+        + (f"{100 * sum(mae) / len(mae):.1f} cm" if mae else "n/a")
+        + f", tick p99 {summary['tick_ms']['p99']} ms"
+    )
+    for name, path in paths.items():
+        console.print(f"{name}: {path}")
+
+
 @app.command("eval")
 def eval_cmd(
     items: Annotated[

@@ -1,0 +1,182 @@
+"""A real Go1 over unitree_legged_sdk 3.8 (low-level UDP): `quaddance deploy --robot go1`.
+
+Optional: ``pip install 'quaddance[go1]'`` installs the SDK (PyPI ``unitree-legged-sdk``,
+module ``unitree_legged_sdk.robot_interface``); it is imported only when this backend runs.
+
+The SDK expects a command every 2 ms, so a 500 Hz thread exchanges LowCmd / LowState with the
+robot and passes every command through the SDK's own guards (``Safety.PositionLimit`` and
+``Safety.PowerProtect`` at the chosen level) before sending; the 50 Hz runner only swaps the
+command that thread sends. Our safety layer (`quaddance.deploy.safety`) runs before that.
+
+Joint order: the SDK's motors are FR_0, FR_1, FR_2, FL_0, ... RL_2 (hip, thigh, calf per leg,
+legs FR, FL, RR, RL; the SDK's quadruped.h), which is quaddance's model order, and the
+angles follow the same URDF conventions (mjlab's go1.xml comes from Unitree's model): the
+nominal stand in Unitree's examples (0, 0.85, -1.75 per front leg) reads as ours does. So
+the map is the identity with signs +1, written out below so that a test holds it. The SDK's
+foot forces come in leg order FR, FL, RR, RL; quaddance's feet are FL, FR, RL, RR.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from types import ModuleType
+
+import numpy as np
+
+from quaddance.deploy.robot import JointCommand, Reading, Robot
+from quaddance.errors import QuaddanceError
+from quaddance.sim import go1
+
+LOWLEVEL = 0xFF  #: the SDK's low-level control flag
+SERVO_MODE = 0x0A  #: motor mode: PD servo (0x00 is idle)
+ROBOT_IP = "192.168.123.10"  #: the Go1's motor controller board on its wired network
+ROBOT_PORT = 8007
+LOCAL_PORT = 8080
+LOOP_S = 0.002  #: 500 Hz, the SDK examples' low-level loop
+
+#: SDK motor index of each model joint, and the sign turning an SDK angle into ours.
+SDK_INDEX: tuple[int, ...] = tuple(range(go1.NUM_JOINTS))
+SDK_SIGN: tuple[float, ...] = (1.0,) * go1.NUM_JOINTS
+#: SDK foot (FR, FL, RR, RL) for each quaddance foot (FL, FR, RL, RR).
+SDK_FOOT: tuple[int, ...] = (1, 0, 3, 2)
+
+
+def load_sdk() -> ModuleType:
+    """The SDK's Python module, or one clear error saying how to get it."""
+    try:
+        from unitree_legged_sdk import robot_interface
+    except ImportError as err:
+        raise QuaddanceError(
+            f"--robot go1 needs unitree_legged_sdk ({err}): pip install 'quaddance[go1]'"
+        ) from None
+    return robot_interface
+
+
+def fill_low_cmd(low_cmd, cmd: JointCommand) -> None:
+    """Write a `JointCommand` (model order) into an SDK ``LowCmd``, servo mode."""
+    low_cmd.levelFlag = LOWLEVEL
+    for j in range(go1.NUM_JOINTS):
+        m = low_cmd.motorCmd[SDK_INDEX[j]]
+        sign = SDK_SIGN[j]
+        m.mode = SERVO_MODE
+        m.q = float(sign * cmd.q_rad[j])
+        m.dq = float(sign * cmd.dq_rad_s[j])
+        m.Kp = float(cmd.kp[j])
+        m.Kd = float(cmd.kd[j])
+        m.tau = float(sign * cmd.tau_ff_nm[j])
+
+
+def reading_from_low_state(state) -> Reading:
+    """An SDK ``LowState`` as a `Reading` (model joint order, quaddance foot order).
+
+    ``seq`` is the robot's millisecond ``tick``: it advances with every new state.
+    """
+    ms = state.motorState
+    q = np.array([SDK_SIGN[j] * ms[SDK_INDEX[j]].q for j in range(go1.NUM_JOINTS)])
+    dq = np.array([SDK_SIGN[j] * ms[SDK_INDEX[j]].dq for j in range(go1.NUM_JOINTS)])
+    force = np.asarray(state.footForce, dtype=np.float64)
+    return Reading(
+        seq=int(state.tick),
+        stamp_s=int(state.tick) / 1000.0,
+        quat_wxyz=np.asarray(state.imu.quaternion, dtype=np.float64),  # SDK order: w, x, y, z
+        gyro_rad_s=np.asarray(state.imu.gyroscope, dtype=np.float64),
+        joint_pos_rad=q,
+        joint_vel_rad_s=dq,
+        foot_force_n=force[list(SDK_FOOT)],  # raw sensor units on a Go1, not newtons
+    )
+
+
+class Go1Robot(Robot):
+    """`Robot` over the SDK's low-level UDP link, with its PositionLimit and PowerProtect."""
+
+    name = "go1"
+
+    def __init__(
+        self,
+        robot_ip: str = ROBOT_IP,
+        power_level: int = 1,
+        local_port: int = LOCAL_PORT,
+        robot_port: int = ROBOT_PORT,
+    ) -> None:
+        if not 1 <= power_level <= 10:
+            raise QuaddanceError(f"--power-level must be 1-10, got {power_level}")
+        self.robot_ip = robot_ip
+        self.power_level = power_level
+        self.local_port = local_port
+        self.robot_port = robot_port
+        self._sdk: ModuleType | None = None
+        self._lock = threading.Lock()
+        self._cmd: JointCommand | None = None
+        self._latest: Reading | None = None
+        self._running = False
+        self._thread: threading.Thread | None = None
+        self.power_protect_trips = 0
+
+    def start(self, timeout_s: float = 5.0) -> Reading:
+        sdk = self._sdk = load_sdk()
+        self._udp = sdk.UDP(LOWLEVEL, self.local_port, self.robot_ip, self.robot_port)
+        self._safe = sdk.Safety(sdk.LeggedType.Go1)
+        self._low_cmd = sdk.LowCmd()
+        self._low_state = sdk.LowState()
+        self._udp.InitCmdData(self._low_cmd)
+        self._running = True
+        self._thread = threading.Thread(target=self._loop, name="go1-lowlevel", daemon=True)
+        self._thread.start()
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            reading = self.read()
+            if reading is not None and reading.seq != 0:
+                return reading
+            time.sleep(0.01)
+        self.close()
+        raise QuaddanceError(
+            f"no state from the Go1 at {self.robot_ip}:{self.robot_port} within {timeout_s:g} s "
+            "(network set-up: docs/DEPLOY.md)"
+        )
+
+    def _loop(self) -> None:
+        # Until the runner's first command: idle motors (mode 0, no torque), as the SDK starts.
+        next_t = time.monotonic()
+        while self._running:
+            self._udp.Recv()
+            self._udp.GetRecv(self._low_state)
+            reading = reading_from_low_state(self._low_state)
+            with self._lock:
+                self._latest = reading
+                cmd = self._cmd
+            if cmd is not None:
+                fill_low_cmd(self._low_cmd, cmd)
+                self._safe.PositionLimit(self._low_cmd)
+                if self._safe.PowerProtect(self._low_cmd, self._low_state, self.power_level) < 0:
+                    self.power_protect_trips += 1
+            self._udp.SetSend(self._low_cmd)
+            self._udp.Send()
+            next_t += LOOP_S
+            pause = next_t - time.monotonic()
+            if pause > 0:
+                time.sleep(pause)
+            else:
+                next_t = time.monotonic()
+
+    def read(self) -> Reading | None:
+        with self._lock:
+            return self._latest
+
+    def send(self, cmd: JointCommand) -> None:
+        with self._lock:
+            self._cmd = cmd
+
+    def close(self) -> None:
+        # The last command the runner sent (damping) keeps going out until here.
+        self._running = False
+        if self._thread is not None:
+            self._thread.join(timeout=1.0)
+            self._thread = None
+
+    def info(self) -> dict:
+        return {
+            "robot_ip": self.robot_ip,
+            "power_level": self.power_level,
+            "power_protect_trips": self.power_protect_trips,
+        }

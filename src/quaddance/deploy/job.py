@@ -1,0 +1,128 @@
+"""`quaddance deploy`: a dance, a robot backend, the runner, and the outputs in one call."""
+
+from __future__ import annotations
+
+import math
+import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from quaddance.errors import InputFileError, QuaddanceError
+
+ROBOTS: tuple[str, ...] = ("sim", "go1")
+
+
+def parse_inject(values: list[str] | None) -> list[tuple[str, float]]:
+    """``["push@2.5", ...]`` -> ``[("push", 2.5), ...]`` (fault, dance time s)."""
+    from quaddance.deploy.runner import FAULTS
+
+    out = []
+    for text in values or []:
+        name, sep, at = text.partition("@")
+        try:
+            t_s = float(at)
+        except ValueError:
+            t_s = math.nan
+        if not sep or name not in FAULTS or not (math.isfinite(t_s) and t_s >= 0):
+            raise QuaddanceError(
+                f"--inject {text!r}: use FAULT@T with FAULT one of {', '.join(FAULTS)} and T "
+                "the dance time in seconds (>= 0)"
+            )
+        out.append((name, t_s))
+    return out
+
+
+@dataclass
+class DeployJob:
+    """What `quaddance deploy` was asked to do."""
+
+    out_dir: Path
+    robot: str = "sim"
+    song: Path | None = None
+    motion: Path | None = None
+    dance: Path | None = None  #: a ready dance.npz
+    demo: bool = False
+    policy: Path | None = None
+    seconds: float | None = None
+    auto_start: bool = False
+    inject: list[tuple[str, float]] = field(default_factory=list)
+    mode: str = "feasible"
+    seed: int = 0
+    robot_ip: str = "192.168.123.10"
+    power_level: int = 1
+
+
+def make_robot(job: DeployJob):
+    if job.robot == "sim":
+        from quaddance.deploy.sim_backend import SimRobot
+
+        return SimRobot()
+    if job.robot == "go1":
+        from quaddance.deploy.go1_backend import Go1Robot, load_sdk
+
+        load_sdk()  # the missing-SDK error before anything else happens
+        return Go1Robot(job.robot_ip, job.power_level)
+    raise QuaddanceError(f"--robot must be one of {', '.join(ROBOTS)}, got {job.robot!r}")
+
+
+def run_deploy(job: DeployJob, status: Callable[[str], None] = lambda m: None) -> tuple[dict, dict]:
+    """Run the job; returns (deploy.json contents, output paths)."""
+    from quaddance.dancefile import load_dance
+    from quaddance.deploy.runner import DeployOptions, Runner, write_outputs
+    from quaddance.fileio import check_output_file, ensure_dir
+    from quaddance.play.dance import target_config_for
+    from quaddance.play.policy import OnnxPolicy, shipped_policy_path
+
+    n_sources = (job.song is not None) + job.demo + (job.dance is not None)
+    if n_sources > 1 or (job.dance and job.motion) or (n_sources == 0 and job.motion is None):
+        raise QuaddanceError("give one of SONG, --demo, --dance FILE or --motion FILE")
+    if job.robot not in ROBOTS:
+        raise QuaddanceError(f"--robot must be one of {', '.join(ROBOTS)}, got {job.robot!r}")
+    if job.inject and job.robot != "sim":
+        raise QuaddanceError("--inject works with --robot sim only (never on a real robot)")
+    if job.seconds is not None and not (math.isfinite(job.seconds) and job.seconds > 0):
+        raise QuaddanceError(f"--seconds must be > 0, got {job.seconds}")
+    for path in (job.song, job.motion, job.dance):
+        if path is not None and not Path(path).is_file():
+            raise InputFileError(path, "no such file")
+    policy = OnnxPolicy.load(job.policy or shipped_policy_path())
+    out = ensure_dir(job.out_dir)
+    for name in ("deploy.json", "log.npz"):
+        check_output_file(out / name)  # refuse a FIFO or a folder before the robot moves
+
+    with tempfile.TemporaryDirectory(prefix="quaddance-deploy-") as tmp:
+        song = job.song
+        if job.demo:
+            from quaddance.music.synth import write_demo_song
+
+            song = Path(tmp) / "demo_song.wav"
+            write_demo_song(song)
+        if job.dance is not None:
+            dance = load_dance(job.dance)
+        else:
+            from quaddance.pipeline import make_dance
+
+            status("analysing the music and choreographing")
+            dance, _ = make_dance(
+                song, job.motion, mode=job.mode, seed=job.seed,
+                target_cfg=target_config_for(policy, job.mode),
+            )
+        if abs(dance.fps - policy.task.policy_hz) > 1e-6:
+            raise InputFileError(
+                job.dance or song or job.motion,
+                f"dance is at {dance.fps:g} Hz but the policy runs at {policy.task.policy_hz:g} Hz",
+            )
+        max_h = (policy.meta.get("targets") or {}).get("max_height_m")
+        if max_h is not None and float(dance.targets_m[:, :2].max()) > max_h + 1e-6:
+            status(
+                f"warning: targets up to {dance.targets_m[:, :2].max():.2f} m; the policy was "
+                f"trained up to {max_h:.2f} m (quaddance choreograph --mode feasible)"
+            )
+        options = DeployOptions(
+            seconds=job.seconds, auto_start=job.auto_start, inject=job.inject, song=song
+        )
+        runner = Runner(make_robot(job), policy, dance.targets_m, options, status=status)
+        result = runner.run()
+    paths = write_outputs(out, result)
+    return result.summary, paths

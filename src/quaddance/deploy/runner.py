@@ -1,0 +1,522 @@
+"""The dance runner: a 50 Hz loop on the wall clock that reads a `Robot`, runs the policy,
+and sends joint commands through the `Safety` layer; then writes deploy.json and log.npz.
+
+The policy side (`DanceController`) builds the actor's observation with the training code's
+own `ActorObservation` and the joint targets with the task's own `DanceEnv.joint_targets`,
+so what the policy sees and commands on a robot is what it saw and commanded in training.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import select
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from quaddance.deploy.robot import JointCommand, Reading, Robot, raise_priority
+from quaddance.deploy.safety import STATES, Safety, SafetyCfg, go1_joint_range_rad
+from quaddance.errors import QuaddanceError
+from quaddance.play.policy import OnnxPolicy
+from quaddance.sim import go1
+from quaddance.sim.feedforward import FrontLiftFeedforward
+from quaddance.sim.kinematics import foot_pos_b
+from quaddance.sim.observations import ActorObservation, Measurement
+from quaddance.sim.task import DanceEnv
+
+#: Real-time priority of the runner; the simulated robot's (a separate machine's motor
+#: boards, in reality) is above it.
+RUNNER_RT_PRIORITY = 10
+
+#: Faults `--inject` can ask for (the sim backend implements them).
+FAULTS: tuple[str, ...] = ("push", "freeze", "nan", "lag")
+
+
+class DanceController:
+    """One robot's policy step: reading -> observation -> action -> joint targets.
+
+    Duck-types the parts of `DanceEnv` that `DanceEnv.joint_targets` reads (nominal pose,
+    action scale, feed-forward, `targets_at`), so the joint-target law has one definition.
+    """
+
+    def __init__(self, policy: OnnxPolicy, targets_m: np.ndarray) -> None:
+        cfg = policy.task
+        self.policy = policy
+        self.cfg = cfg
+        self.dev = torch.device("cpu")
+        self.targets = torch.as_tensor(np.asarray(targets_m), dtype=torch.float32)
+        if self.targets.ndim != 2 or self.targets.shape[1] != 4 or self.targets.shape[0] < 1:
+            raise QuaddanceError(f"dance targets must be (T, 4), got {tuple(self.targets.shape)}")
+        self.actor_obs = ActorObservation(cfg, 1, self.dev)
+        spec = policy.spec  # the policy's JSON contract
+        self.nominal_joint_pos = torch.tensor(spec.nominal_joint_pos_rad, dtype=torch.float32)
+        self.action_scale = torch.tensor(spec.action_scale, dtype=torch.float32)
+        ff = spec.front_feedforward
+        self.feedforward = (
+            FrontLiftFeedforward(cfg.scene, self.dev, np.asarray(ff.thigh_calf_offsets_rad))
+            if cfg.front_feedforward and ff is not None
+            else None
+        )
+        self.step = 0  # dance step (policy ticks since dance time 0)
+        self.last_action = torch.zeros(1, go1.NUM_JOINTS)
+        self._ids = torch.zeros(1, dtype=torch.long)
+
+    @property
+    def n_steps(self) -> int:
+        return int(self.targets.shape[0])
+
+    def targets_at(self, ahead_steps: int) -> torch.Tensor:
+        """(1, 4) targets ``ahead_steps`` ticks from the current step (held at the end)."""
+        return self.targets[min(self.step + ahead_steps, self.n_steps - 1)][None]
+
+    @staticmethod
+    def measurement(reading: Reading) -> Measurement:
+        t = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float32)[None]  # noqa: E731
+        return Measurement.from_imu(
+            t(reading.quat_wxyz), t(reading.gyro_rad_s),
+            t(reading.joint_pos_rad), t(reading.joint_vel_rad_s),
+        )
+
+    def reset(self, reading: Reading) -> None:
+        """Dance time 0: no previous action, the history filled with the current frame."""
+        self.step = 0
+        self.last_action = torch.zeros(1, go1.NUM_JOINTS)
+        prop = self.actor_obs.proprio(self.measurement(reading), self.last_action)
+        self.actor_obs.reset(self._ids, prop)
+
+    def observe(self, reading: Reading, step: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """(proprio frame, observation (1, D)) at dance step ``step``."""
+        self.step = step
+        prop = self.actor_obs.proprio(self.measurement(reading), self.last_action)
+        return prop, self.actor_obs.build(prop, self.targets_at)
+
+    def commit(self, prop: torch.Tensor, action: torch.Tensor) -> None:
+        """The frame just seen joins the history; ``action`` is what the robot now does."""
+        self.actor_obs.push(prop)
+        self.last_action = action
+
+    def joint_targets(self, action: torch.Tensor) -> torch.Tensor:
+        return DanceEnv.joint_targets(self, action)  # type: ignore[arg-type]
+
+
+@dataclass
+class DeployOptions:
+    """What `quaddance deploy` was asked to do, besides the robot and the dance."""
+
+    seconds: float | None = None  #: dance at most this long
+    auto_start: bool = False  #: start the dance without waiting for Enter
+    inject: list[tuple[str, float]] = field(default_factory=list)  #: (fault, dance time s)
+    song: Path | None = None  #: played where an audio device exists
+    safety: SafetyCfg = field(default_factory=SafetyCfg)
+
+
+@dataclass
+class DeployResult:
+    summary: dict
+    log: dict[str, np.ndarray]
+
+
+class _Stop:
+    """SIGINT / SIGTERM -> a flag the loop reads (the loop then damps and writes the log)."""
+
+    def __init__(self) -> None:
+        self.signal: int | None = None
+        self._old: dict[int, object] = {}
+
+    def __enter__(self) -> _Stop:
+        def handler(signum: int, frame: object) -> None:
+            self.signal = self.signal or signum
+
+        for s in (signal.SIGINT, signal.SIGTERM):
+            self._old[s] = signal.signal(s, handler)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for s, h in self._old.items():
+            signal.signal(s, h)  # type: ignore[arg-type]
+
+
+class _Audio:
+    """Music from an external player where the machine has a sound device; else silence."""
+
+    def __init__(self, song: Path | None) -> None:
+        self.song = song
+        self.proc: subprocess.Popen | None = None
+        self._cmd: list[str] | None = None
+        self.status = "no song"
+        if song is None:
+            return
+        player = None
+        if os.path.exists("/dev/snd") or sys.platform == "darwin":
+            for cmd in (["ffplay", "-nodisp", "-autoexit", "-loglevel", "quiet"], ["afplay"]):
+                if shutil.which(cmd[0]):
+                    player = cmd
+                    break
+        self._cmd = None if player is None else [*player, str(song)]
+        self.status = "ready" if self._cmd else "no audio device or player: dancing silently"
+
+    def start(self) -> None:
+        if self._cmd is not None:
+            self.proc = subprocess.Popen(
+                self._cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+            )
+            self.status = "played"
+
+    def stop(self) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.terminate()
+
+
+def _enter_pressed() -> bool | None:
+    """True if a line came on stdin, False if none yet, None when stdin is closed."""
+    try:
+        ready, _, _ = select.select([sys.stdin], [], [], 0)
+    except (ValueError, OSError):
+        return None
+    if not ready:
+        return False
+    return None if sys.stdin.readline() == "" else True
+
+
+class Runner:
+    """Drives one robot through passive -> stand -> ready -> dance -> done (or damp)."""
+
+    def __init__(
+        self,
+        robot: Robot,
+        policy: OnnxPolicy,
+        targets_m: np.ndarray,
+        options: DeployOptions,
+        status: Callable[[str], None] = lambda msg: None,
+    ) -> None:
+        self.robot = robot
+        self.policy = policy
+        self.opt = options
+        self.status = status
+        self.ctrl = DanceController(policy, targets_m)
+        cfg = policy.task
+        self.tick_s = 1.0 / cfg.policy_hz
+        n = self.ctrl.n_steps
+        if options.seconds is not None:
+            n = min(n, max(1, round(options.seconds * cfg.policy_hz)))
+        self.dance_steps = n
+        self.safety = Safety(
+            options.safety,
+            kp=policy.spec.kp,
+            kd=policy.spec.kd,
+            nominal_rad=np.asarray(policy.spec.nominal_joint_pos_rad, dtype=np.float64),
+            joint_range_rad=go1_joint_range_rad(),
+            tick_s=self.tick_s,
+        )
+        self.geom = self.ctrl.actor_obs.geom
+
+    # --- helpers ---------------------------------------------------------------------------
+    def _posture(self, reading: Reading) -> tuple[np.ndarray, np.ndarray, float]:
+        """Gravity in the trunk frame, estimated foot heights (FL FR RL RR) and trunk height
+        above the lowest foot's bottom, from the IMU and encoders."""
+        meas = self.ctrl.measurement(reading)
+        g = meas.projected_gravity_b[0].numpy().astype(np.float64)
+        # Foot centres along world up, trunk frame origin at 0 (kinematics.py's estimator
+        # subtracts the lowest one; the trunk height is minus it).
+        z = foot_pos_b(meas.joint_pos_rad, self.geom)[0].numpy() @ (-g / np.linalg.norm(g))
+        return g, z - z.min(), float(-z.min()) + go1.FOOT_RADIUS_M
+
+    # --- the loop --------------------------------------------------------------------------
+    def run(self) -> DeployResult:
+        torch.set_num_threads(1)  # one robot: threads only add latency
+        self.priority = raise_priority(RUNNER_RT_PRIORITY)
+        audio = _Audio(self.opt.song)
+        if self.opt.song is not None:
+            self.status(f"music: {audio.status}")
+        self.status(f"connecting to the robot ({self.robot.name})")
+        first = self.robot.start()
+        sf, dt = self.safety, self.tick_s
+        rows: dict[str, list] = {k: [] for k in _LOG_KEYS}
+        injections = sorted(self.opt.inject, key=lambda f: f[1])
+        injected: list[dict] = []
+        last_cmd = sf.damping_command(first.joint_pos_rad)
+        last_reading = first
+        last_gravity = np.array([0.0, 0.0, -1.0])
+        dance_start: float | None = None
+        dance_end_s: float | None = None
+        done_from: np.ndarray | None = None
+        overruns = 0
+        last_seq = -1
+        stop_reason = ""
+        t0 = time.monotonic()
+        sf.entered_s = t0
+        self.status("passive (damping); soft start follows")
+        k = 0
+        with _Stop() as stop:
+            while True:
+                wake = t0 + k * dt
+                pause = wake - time.monotonic()
+                if pause > 0:
+                    time.sleep(pause)
+                elif pause < -dt:
+                    # Missed whole ticks (machine stalled): skip them rather than burst.
+                    missed = int(-pause / dt)
+                    overruns += missed
+                    k += missed
+                now = time.monotonic()
+                t_dance = now - dance_start if dance_start is not None else math.nan
+                reading = self.robot.read()
+                state_before = sf.state
+                held = False
+                infer_s = math.nan
+                action = np.full(go1.NUM_JOINTS, np.nan)
+                feet = np.full(4, np.nan)
+                tau_est = np.full(go1.NUM_JOINTS, np.nan)
+                targets_now = np.full(4, np.nan)
+
+                if stop.signal is not None:
+                    sf.damp(f"signal {signal.Signals(stop.signal).name}", now)
+                if sf.state != "damp":
+                    why = sf.check_reading(reading)
+                    if why is not None:
+                        sf.damp(why, now)
+                r = reading if reading is not None else last_reading
+                if sf.state not in ("damp",) and r.is_finite():
+                    last_reading = r
+                    last_gravity, feet, trunk_m = self._posture(r)
+                    if sf.state not in ("passive",) and not (
+                        sf.state == "done" and now - sf.entered_s >= self.opt.safety.done_stand_s
+                    ):
+                        why = sf.check_posture(last_gravity, trunk_m)
+                        if why is not None:
+                            sf.damp(why, now)
+
+                # --- state machine ---
+                if sf.state == "passive":
+                    cmd = sf.damping_command(r.joint_pos_rad)
+                    if now - sf.entered_s >= self.opt.safety.passive_s:
+                        sf.stand_from = r.joint_pos_rad.copy()
+                        sf.go("stand", "soft start", now)
+                        self.status("stand: soft start to the nominal pose")
+                if sf.state == "stand":
+                    target, kp = sf.stand_target(now)
+                    cmd, tau_est = sf.guard(target, kp, r)
+                    if now - sf.entered_s >= self.opt.safety.stand_s:
+                        sf.go("ready", "standing", now)
+                        self.status(
+                            "ready: dancing in 0.5 s" if self.opt.auto_start
+                            else "ready: press Enter to dance (Ctrl-C stops)"
+                        )
+                elif sf.state == "ready":
+                    cmd, tau_est = sf.guard(sf.nominal_rad, sf.kp, r)
+                    go = False
+                    if self.opt.auto_start:
+                        go = now - sf.entered_s >= self.opt.safety.ready_settle_s
+                    else:
+                        pressed = _enter_pressed()
+                        if pressed is None:
+                            sf.go("done", "stdin closed: nobody to press Enter", now)
+                            done_from = sf.last_target
+                        go = bool(pressed)
+                    if go:
+                        self.ctrl.reset(r)
+                        dance_start = now
+                        t_dance = 0.0
+                        sf.go("dance", "start", now)
+                        audio.start()
+                        self.status(f"dance: {self.dance_steps * dt:.1f} s")
+                if sf.state == "dance":
+                    step = round(t_dance / dt)
+                    while injections and injections[0][1] <= t_dance + 1e-9:
+                        name, at_s = injections.pop(0)
+                        ok = self.robot.inject(name)
+                        injected.append({"fault": name, "at_s": at_s, "t_s": round(t_dance, 4),
+                                         "sent": ok})
+                        self.status(f"injected {name} at {t_dance:.2f} s")
+                    if step >= self.dance_steps:
+                        dance_end_s = t_dance
+                        done_from = sf.last_target
+                        sf.go("done", "dance finished", now)
+                        audio.stop()
+                    else:
+                        targets_now = self.ctrl.targets[min(step, self.ctrl.n_steps - 1)].numpy()
+                        prop, obs = self.ctrl.observe(r, step)
+                        if not torch.isfinite(obs).all():
+                            sf.damp("NaN/Inf in the observation", now)
+                        else:
+                            t_inf = time.perf_counter()
+                            act = torch.from_numpy(self.policy.act(obs.numpy()))
+                            infer_s = time.perf_counter() - t_inf
+                            action = act[0].numpy().astype(np.float64)
+                            if not torch.isfinite(act).all():
+                                sf.damp("NaN/Inf in the action", now)
+                            elif infer_s > self.opt.safety.inference_budget_s:
+                                # Too late to be the answer to this state: keep the last
+                                # command and the last action the policy will see.
+                                held = True
+                                sf.counts.held_inference += 1
+                                self.ctrl.commit(prop, self.ctrl.last_action)
+                                cmd = last_cmd
+                            else:
+                                self.ctrl.commit(prop, act.clamp(-10.0, 10.0))
+                                target = self.ctrl.joint_targets(self.ctrl.last_action)
+                                cmd, tau_est = sf.guard(target[0].numpy().astype(np.float64),
+                                                        sf.kp, r)
+                if sf.state == "done":
+                    into = now - sf.entered_s
+                    if into < self.opt.safety.done_stand_s:
+                        start = done_from if done_from is not None else sf.nominal_rad
+                        u = into / self.opt.safety.done_stand_s
+                        target = start + (u * u * (3 - 2 * u)) * (sf.nominal_rad - start)
+                        cmd, tau_est = sf.guard(target, sf.kp, r)
+                    elif into < self.opt.safety.done_stand_s + self.opt.safety.done_damp_s:
+                        cmd = sf.damping_command(r.joint_pos_rad)
+                    else:
+                        stop_reason = "done"
+                if sf.state == "damp":
+                    if state_before != "damp":
+                        audio.stop()
+                        self.status(f"DAMP: {sf.events[-1].reason}")
+                        if dance_start is not None and dance_end_s is None:
+                            dance_end_s = t_dance
+                    cmd = sf.damping_command(r.joint_pos_rad)
+                    # After a signal the user wants out: 0.2 s of damping commands suffice.
+                    hold_s = 0.2 if stop.signal is not None else self.opt.safety.damp_hold_s
+                    if now - sf.entered_s >= hold_s:
+                        stop_reason = "damp"
+                if not cmd.is_finite():
+                    sf.damp("NaN/Inf in the command", now)
+                    cmd = sf.damping_command(np.nan_to_num(r.joint_pos_rad))
+                self.robot.send(cmd)
+                last_cmd = cmd
+                work_ms = (time.monotonic() - now) * 1e3
+                new = reading is not None and reading.seq != last_seq
+                last_seq = r.seq
+                _append(rows, t_dance, now - t0, r, new, sf.state, last_gravity,
+                        feet, cmd, tau_est, action, targets_now, held, infer_s, work_ms)
+                k += 1
+                if stop_reason:
+                    break
+        audio.stop()
+        self.robot.close()
+        if dance_start is not None and dance_end_s is None:
+            dance_end_s = rows["t_s"][-1]
+        return self._result(rows, dance_start, t0, dance_end_s, injected, overruns, audio)
+
+    def _result(self, rows, dance_start, t0, dance_end_s, injected, overruns, audio):
+        from quaddance.play.dance import target_config_for
+        from quaddance.play.metrics import feasible_mask, tracking_metrics
+
+        log = {k: np.asarray(v) for k, v in rows.items()}
+        log["state_names"] = np.asarray(STATES)
+        # Dance time: 0 when the dance started (earlier events negative); runner time if the
+        # dance never started.
+        zero = dance_start if dance_start is not None else t0
+        events = [e.to_json(zero) for e in self.safety.events]
+        truth = self.robot.truth()
+        dancing = log["state"] == STATES.index("dance")
+        feet_source = "kinematic estimate (encoders + IMU)"
+        feet = log["feet_est_m"]
+        falls: int
+        if truth is not None and len(truth.get("mono_s", [])):
+            idx = np.searchsorted(truth["mono_s"], log["wall_s"] + t0, side="right") - 1
+            idx = np.clip(idx, 0, len(truth["mono_s"]) - 1)
+            log["feet_true_m"] = truth["feet_m"][idx]
+            log["base_height_true_m"] = truth["base_height_m"][idx]
+            log["tilt_true_rad"] = truth["tilt_rad"][idx]
+            # How far the simulated robot's physics ran behind the wall clock (machine load).
+            self.sim_late_ms = _pcts(truth["late_s"] * 1e3)
+            feet, feet_source = log["feet_true_m"], "simulator truth"
+            fallen = (truth["trunk_contact"] | (truth["tilt_rad"] > self.policy.task.max_tilt_rad)
+                      | (truth["base_height_m"] < self.policy.task.min_base_height_m))
+            # Only while it should stand: from `ready` on, and not in the damping that ends a
+            # normal run (lying down then is the plan, not a fall).
+            up = np.isin(log["state"], [STATES.index(s) for s in ("ready", "dance", "done")])
+            start = t0 + log["wall_s"][up].min() if up.any() else np.inf
+            end = np.inf
+            done = [e for e in self.safety.events if e.to == "done"]
+            if self.safety.state == "done" and done:
+                end = done[-1].clock_s + self.opt.safety.done_stand_s
+            fallen &= (truth["mono_s"] >= start) & (truth["mono_s"] < end)
+            falls = int(np.count_nonzero(np.diff(fallen.astype(int), prepend=0) == 1))
+        else:
+            falls = sum(1 for e in self.safety.events if e.to == "damp" and (
+                "roll" in e.reason or "collapsing" in e.reason))
+        front, rear = None, None
+        if dancing.sum() >= 2:
+            tgt, fm = log["targets_m"][dancing], feet[dancing]
+            feasible_max = target_config_for(self.policy, "feasible").max_height_m
+            front = tracking_metrics(tgt, fm, feasible_mask(tgt, feasible_max))
+            rear = float(np.clip(fm[:, 2:], 0.0, None).mean())
+        work = log["tick_ms"]
+        period = np.diff(log["wall_s"]) * 1e3
+        summary = {
+            "robot": self.robot.name,
+            "policy": str(self.policy.onnx_path),
+            "duration_s": round(float(dance_end_s), 3) if dance_end_s is not None else 0.0,
+            "falls": falls,
+            "final_state": self.safety.state,
+            "events": events,
+            "front": front,
+            "rear_lift_mean_m": rear,
+            "tick_ms": _pcts(work),
+            "period_ms": _pcts(period),
+            "feet_source": feet_source,
+            "guards": self.safety.counts.to_json(),
+            "overrun_ticks": overruns,
+            "injected": injected,
+            "audio": audio.status,
+            "priority": self.priority,
+        }
+        info = self.robot.info()
+        if self.robot.name == "sim":
+            summary["sim"] = {**info, "late_ms": getattr(self, "sim_late_ms", None)}
+        elif info:
+            summary[self.robot.name] = info
+        return DeployResult(summary=summary, log=log)
+
+
+_LOG_KEYS = (
+    "t_s", "wall_s", "seq", "new_state", "age_s", "state", "q", "dq", "q_target", "kp", "kd",
+    "tau_est_nm", "gyro", "gravity", "feet_est_m", "action", "targets_m", "held",
+    "inference_ms", "tick_ms",
+)
+
+
+def _append(rows, t_dance, wall_s, r: Reading, new: bool, state: str, gravity, feet,
+            cmd: JointCommand, tau_est, action, targets, held, infer_s, work_ms) -> None:
+    vals = {
+        "t_s": t_dance, "wall_s": wall_s, "seq": r.seq, "new_state": new, "age_s": r.age_s,
+        "state": STATES.index(state), "q": r.joint_pos_rad, "dq": r.joint_vel_rad_s,
+        "q_target": cmd.q_rad, "kp": cmd.kp[0], "kd": cmd.kd[0], "tau_est_nm": tau_est,
+        "gyro": r.gyro_rad_s, "gravity": gravity, "feet_est_m": feet, "action": action,
+        "targets_m": targets, "held": held, "inference_ms": infer_s * 1e3, "tick_ms": work_ms,
+    }
+    for k, v in vals.items():
+        rows[k].append(np.array(v, copy=True))
+
+
+def _pcts(values: np.ndarray) -> dict:
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    if not v.size:
+        return {"p50": None, "p99": None, "max": None}
+    return {"p50": round(float(np.percentile(v, 50)), 3),
+            "p99": round(float(np.percentile(v, 99)), 3), "max": round(float(v.max()), 3)}
+
+
+def write_outputs(out_dir: Path, result: DeployResult) -> dict[str, Path]:
+    """deploy.json and log.npz, each written atomically."""
+    from quaddance.fileio import atomic_path, ensure_dir, write_json
+
+    out = ensure_dir(out_dir)
+    paths = {"summary": out / "deploy.json", "log": out / "log.npz"}
+    with atomic_path(paths["log"]) as tmp:
+        np.savez_compressed(tmp, **result.log)
+    write_json(paths["summary"], result.summary)
+    return paths

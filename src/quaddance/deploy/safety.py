@@ -1,0 +1,197 @@
+"""The safety layer every backend goes through: a state machine and per-tick guards.
+
+States: ``passive`` (damping) -> ``stand`` (soft start from the measured pose to the nominal
+one, gains ramped) -> ``ready`` (holds the stand; Enter or --auto-start) -> ``dance`` ->
+``done`` (back to the stand, then damping). Any state but passive may fall into ``damp``:
+damping commands until the runner exits. The ideas follow public Go1 deploy code (Walk These
+Ways: soft start, stop on large roll/pitch; unitree_rl_gym: zero torque -> 2 s to the
+default pose -> run, damping on demand); the code is ours.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from quaddance.deploy.robot import JointCommand, Reading
+from quaddance.sim import go1
+
+STATES: tuple[str, ...] = ("passive", "stand", "ready", "dance", "done", "damp")
+
+
+def soft_joint_limits_rad(joint_range_rad: np.ndarray, margin_rad: float) -> np.ndarray:
+    """(12, 2) target limits: each joint's range (mjlab's go1.xml) less ``margin_rad`` at
+    both ends. Not the task's 0.9-of-range reward limits: the front-lift feed-forward asks
+    the calves for -2.70 rad at 0.25 m, inside the range (-2.82) but outside 0.9 of it."""
+    return np.stack([joint_range_rad[:, 0] + margin_rad, joint_range_rad[:, 1] - margin_rad], 1)
+
+
+def go1_joint_range_rad() -> np.ndarray:
+    """(12, 2) joint ranges of the model, rad (read from the scene's MJCF: one source)."""
+    from quaddance.sim.scene import build_model
+
+    return np.asarray(build_model().jnt_range[1:], dtype=np.float64)
+
+
+def effort_limits_nm() -> np.ndarray:
+    """(12,) motor torque limits, model order (`quaddance.sim.go1`)."""
+    return np.array(
+        [
+            go1.KNEE_EFFORT_NM if n.endswith("calf_joint") else go1.HIP_EFFORT_NM
+            for n in go1.JOINT_NAMES
+        ]
+    )
+
+
+def roll_pitch_rad(projected_gravity_b: np.ndarray) -> tuple[float, float]:
+    """Roll and pitch of the trunk from the unit gravity direction in its frame."""
+    gx, gy, gz = (float(v) for v in projected_gravity_b)
+    return math.atan2(-gy, -gz), math.atan2(gx, math.hypot(gy, gz))
+
+
+@dataclass(frozen=True)
+class SafetyCfg:
+    """Limits and timings of the safety layer; ticks are policy ticks (50 Hz)."""
+
+    passive_s: float = 0.5  #: damping before the soft start (the pose is measured at its end)
+    stand_s: float = 2.5  #: soft start duration (the issue asks >= 2 s; unitree_rl_gym: 2 s)
+    gain_ramp_s: float = 1.5  #: kp ramps from 0 to the policy's kp over this part of it
+    ready_settle_s: float = 0.5  #: --auto-start waits this long in `ready`
+    done_stand_s: float = 1.5  #: after the dance: back to the nominal pose
+    done_damp_s: float = 1.0  #: then damping before the runner exits
+    damp_hold_s: float = 1.0  #: damping commands sent after a fault before exiting
+    damp_kd: float = 1.0  #: N m s / rad, joint damping of the damping mode
+    max_roll_pitch_rad: float = 0.8  #: beyond: damp (WTW crouches at 1.6; we stop earlier)
+    min_trunk_height_m: float = 0.15  #: trunk above the lowest foot (nominal 0.27): collapse
+    stale_ticks: int = 3  #: this many ticks in a row without a new state: damp
+    max_target_step_rad: float = 0.35  #: largest change of a joint target per tick
+    soft_limit_margin_rad: float = 0.03  #: targets stay this far inside the joint range
+    inference_budget_s: float = 0.010  #: half a tick: past it the last command is held
+
+
+@dataclass
+class Event:
+    clock_s: float  #: runner clock (time.monotonic) of the transition
+    frm: str
+    to: str
+    reason: str
+
+    def to_json(self, zero_s: float) -> dict:
+        """With ``t_s`` relative to ``zero_s`` (dance time 0 on the runner clock)."""
+        t_s = round(self.clock_s - zero_s, 4)
+        return {"t_s": t_s, "from": self.frm, "to": self.to, "reason": self.reason}
+
+
+@dataclass
+class GuardCounts:
+    """How often each per-tick guard acted (deploy.json)."""
+
+    soft_limit: int = 0
+    target_step: int = 0
+    torque: int = 0
+    held_inference: int = 0
+
+    def to_json(self) -> dict:
+        return dict(self.__dict__)
+
+
+@dataclass
+class Safety:
+    """The state machine and the per-tick guards; the runner drives it, one call per tick."""
+
+    cfg: SafetyCfg
+    kp: float
+    kd: float
+    nominal_rad: np.ndarray
+    joint_range_rad: np.ndarray
+    tick_s: float
+    state: str = "passive"
+    events: list[Event] = field(default_factory=list)
+    counts: GuardCounts = field(default_factory=GuardCounts)
+
+    def __post_init__(self) -> None:
+        self.limits_nm = effort_limits_nm()
+        self.soft = soft_joint_limits_rad(self.joint_range_rad, self.cfg.soft_limit_margin_rad)
+        self.entered_s = 0.0  # runner time when the current state began
+        self.last_target: np.ndarray | None = None
+        self._last_seq: int | None = None
+        self._stale = 0
+        self.stand_from: np.ndarray | None = None
+
+    # --- transitions ----------------------------------------------------------------------
+    def go(self, to: str, reason: str, now_s: float) -> None:
+        """Change state at ``now_s`` (runner clock)."""
+        if to == self.state:
+            return
+        self.events.append(Event(now_s, self.state, to, reason))
+        self.state = to
+        self.entered_s = now_s
+
+    def damp(self, reason: str, now_s: float) -> None:
+        if self.state != "damp":
+            self.go("damp", reason, now_s)
+
+    # --- checks on what came in ------------------------------------------------------------
+    def check_reading(self, reading: Reading | None) -> str | None:
+        """Why the robot must damp now (None: keep going): no state, stale or non-finite."""
+        if reading is None or reading.seq == self._last_seq:
+            self._stale += 1
+        else:
+            self._stale = 0
+            self._last_seq = reading.seq
+        if self._stale >= self.cfg.stale_ticks:
+            return f"no new state for {self._stale} ticks"
+        if reading is not None and not reading.is_finite():
+            return "NaN/Inf in the robot state"
+        return None
+
+    def check_posture(self, gravity_b: np.ndarray, trunk_height_m: float) -> str | None:
+        """Toppling or collapsing: roll/pitch past the limit, or the trunk too low."""
+        roll, pitch = roll_pitch_rad(gravity_b)
+        lim = self.cfg.max_roll_pitch_rad
+        if abs(roll) > lim or abs(pitch) > lim:
+            return f"roll {roll:+.2f} / pitch {pitch:+.2f} rad past {lim:g}"
+        if self.state in ("ready", "dance") and trunk_height_m < self.cfg.min_trunk_height_m:
+            return f"trunk collapsing ({trunk_height_m:.3f} m above the feet)"
+        return None
+
+    # --- what goes out ---------------------------------------------------------------------
+    def damping_command(self, q_meas_rad: np.ndarray) -> JointCommand:
+        q = np.where(np.isfinite(q_meas_rad), q_meas_rad, 0.0)
+        self.last_target = None
+        return JointCommand.damping(q, self.cfg.damp_kd)
+
+    def stand_target(self, now_s: float) -> tuple[np.ndarray, float]:
+        """Soft start: target and kp at ``now_s`` in `stand` (smoothstep from the measured
+        pose to the nominal one; kp ramps linearly from 0)."""
+        u = min(1.0, (now_s - self.entered_s) / self.cfg.stand_s)
+        s = u * u * (3 - 2 * u)
+        start = self.stand_from if self.stand_from is not None else self.nominal_rad
+        kp = self.kp * min(1.0, (now_s - self.entered_s) / self.cfg.gain_ramp_s)
+        return start + s * (self.nominal_rad - start), kp
+
+    def guard(
+        self, q_target: np.ndarray, kp: float, reading: Reading
+    ) -> tuple[JointCommand, np.ndarray]:
+        """Clamp a target to the soft limits, to `max_target_step_rad` from the last one, and
+        so that the torque the motor boards will start from, kp (q* - q) - kd dq, stays in
+        the motor limits. Returns the command and the torque estimate before clamping."""
+        q, dq = reading.joint_pos_rad, reading.joint_vel_rad_s
+        target = np.clip(q_target, self.soft[:, 0], self.soft[:, 1])
+        self.counts.soft_limit += int(not np.array_equal(target, q_target))
+        if self.last_target is not None:
+            step = self.cfg.max_target_step_rad
+            stepped = np.clip(target, self.last_target - step, self.last_target + step)
+            self.counts.target_step += int(not np.array_equal(stepped, target))
+            target = stepped
+        tau_est = kp * (target - q) - self.kd * dq
+        tau_ok = np.clip(tau_est, -self.limits_nm, self.limits_nm)
+        if kp > 0 and not np.array_equal(tau_ok, tau_est):
+            self.counts.torque += 1
+            target = q + (tau_ok + self.kd * dq) / kp
+        self.last_target = target
+        z = np.zeros(go1.NUM_JOINTS)
+        cmd = JointCommand(target, z, np.full_like(z, kp), np.full_like(z, self.kd), z.copy())
+        return cmd, tau_est
