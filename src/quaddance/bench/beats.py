@@ -1,12 +1,18 @@
-"""Beat-tracking accuracy: our analyser against librosa's default on songs with exact beats.
+"""Beat-tracking accuracy: our analyser against librosa's default (and, optionally, madmom's
+DBN tracker) on songs with exact beats.
 
-The songs are General MIDI files written here with ``mido`` (tempi 70-180 BPM, swing,
-syncopation, an abrupt and a gradual tempo change, quiet intros) and rendered to audio with
+The songs are General MIDI files written here with ``mido`` and rendered to audio with
 fluidsynth and a General MIDI soundfont; their beats come from the MIDI tempo map, so they are
-exact. A few songs from ``music.synth`` are added. None of them is the demo song.
+exact. Three sets (``SETS``), reported apart: ``tuning`` (the designed songs, 56-180 BPM, plus
+a few from ``music.synth``; the analyser was tuned on them), ``random`` (random styles and
+tempi) and ``untuned`` (``UNTUNED_SONGS``: fast and slow notations, tempo changes, drums or
+keys off the beat, 140-160 BPM rock; fixed before any tuning and never tuned on). None of them
+is the demo song.
 
-The score is the beat F-measure with a +-70 ms window and one-to-one matching (mir_eval style;
-no beats are trimmed from the start).
+Two scores, both with a +-70 ms window and one-to-one matching (mir_eval style; no beats are
+trimmed from the start): the strict beat F-measure, and the F-measure at the tracker's own
+metrical level (``metrical_level_f_measure``: half or double tempo is not counted as an error,
+beats on the off-beats are).
 """
 
 from __future__ import annotations

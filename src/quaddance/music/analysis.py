@@ -14,6 +14,11 @@ Ellis 2007) with the changes that matter for dance music:
 3. The tempo may change: a local tempo curve (Viterbi over windowed autocorrelation near the
    global tempo, with drift and jumps) guides the dynamic program.
 4. Swing: beats that landed on swung off-beats are moved back onto the beat.
+   Off-beats: beats move by half a beat when the bass line changes pitch at their midpoints
+   rather than at them (off-beat hats, skanking keys pull the tracker; harmony does not move).
+   Backbeat: the tempo doubles when the midpoints hold hits as strong as the beats and clearly
+   stronger than the quarter-beat positions (a rock snare on 2 and 4 heard at half tempo: the
+   150 BPM song reported at 75), as long as the doubled tempo stays in the dance range.
 5. Downbeats: the 4/4 bar phase with the most bass onsets and chord changes on beat 1.
 6. Sections: checkerboard novelty on bar-synchronous loudness, onset density and harmony.
 
