@@ -717,6 +717,35 @@ def bench_envelope_cmd(
     print(f"-> {out}, {report}")
 
 
+@bench_app.command("deploy")
+def bench_deploy_cmd(
+    out: Annotated[Path, typer.Option("--out", "-o", help="JSON results.")] = Path(
+        "benchmarks/results/deploy.json"
+    ),
+    seconds: Annotated[
+        float, typer.Option(help="Dance length, s.", callback=finite_in(1.0, 30.0))
+    ] = 20.0,
+) -> None:
+    """Sim-to-sim: the demo song by `dance` and by `deploy --robot sim`; fault deadlines."""
+    from rich.console import Console
+
+    from quaddance.bench.deploy import run
+    from quaddance.fileio import check_output_file, write_json
+
+    check_output_file(out)
+    console = Console(stderr=True)
+    results = run(seconds, log=lambda msg: console.log(msg))
+    write_json(out, results)
+    d, s = results["dance"], results["deploy_sim"]
+    print(
+        f"front MAE: dance {100 * d['front_mae_mean_m']:.2f} cm, deploy sim "
+        f"{100 * (s['front_mae_mean_m'] or float('nan')):.2f} cm; falls {d['falls']} / "
+        f"{s['falls']}; tick p50/p99/max {s['tick_ms']}; time to damp "
+        + ", ".join(f"{k} {v['time_to_damp_s']}" for k, v in results["faults"].items())
+        + f" -> {out}"
+    )
+
+
 @bench_app.command("reach")
 def bench_reach_cmd(
     out: Annotated[Path, typer.Option("--out", "-o", help="JSON results.")] = Path(

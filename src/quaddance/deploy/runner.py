@@ -432,8 +432,13 @@ class Runner:
             # How far the simulated robot's physics ran behind the wall clock (machine load).
             self.sim_late_ms = _pcts(truth["late_s"] * 1e3)
             feet, feet_source = log["feet_true_m"], "simulator truth"
-            fallen = (truth["trunk_contact"] | (truth["tilt_rad"] > self.policy.task.max_tilt_rad)
-                      | (truth["base_height_m"] < self.policy.task.min_base_height_m))
+            # Training's fall (trunk on the floor, tilt, trunk too low), except that sinking
+            # to the floor under damping after a stop is the plan: only toppling counts then.
+            damped = [e.clock_s for e in self.safety.events if e.to == "damp"]
+            before_damp = truth["mono_s"] < (damped[0] if damped else np.inf)
+            task = self.policy.task
+            low = truth["trunk_contact"] | (truth["base_height_m"] < task.min_base_height_m)
+            fallen = (truth["tilt_rad"] > task.max_tilt_rad) | (low & before_damp)
             # Only while it should stand: from `ready` on, and not in the damping that ends a
             # normal run (lying down then is the plan, not a fall).
             up = np.isin(log["state"], [STATES.index(s) for s in ("ready", "dance", "done")])

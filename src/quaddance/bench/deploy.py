@@ -1,0 +1,99 @@
+"""bench deploy: sim-to-sim. The same dance by `quaddance dance` (training simulator, no
+latency) and by `quaddance deploy --robot sim` (another simulator, real time, noise,
+latency, safety layer); then each fault's time to damping. Results as JSON."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+#: Faults, when they are injected (dance s) and how long the dance is (s).
+FAULT_RUNS: tuple[tuple[str, float, float], ...] = (
+    ("push", 1.0, 3.0),
+    ("freeze", 1.0, 3.0),
+    ("nan", 1.0, 3.0),
+    ("lag", 3.0, 6.0),
+)
+DEADLINES_S = {"push": 1.5, "freeze": 0.1, "nan": 0.06}
+
+
+def _deploy(policy, targets, seconds, inject=()) -> dict:
+    from quaddance.deploy.runner import DeployOptions, Runner
+    from quaddance.deploy.sim_backend import SimRobot
+
+    opts = DeployOptions(seconds=seconds, auto_start=True, inject=list(inject))
+    return Runner(SimRobot(), policy, targets, opts).run().summary
+
+
+def _mean_mae(front: dict | None) -> float | None:
+    if not front:
+        return None
+    vals = [front[f]["mae_m"] for f in ("fl", "fr") if front[f]["mae_m"] is not None]
+    return float(np.mean(vals)) if vals else None
+
+
+def run(seconds: float = 20.0, log: Callable[[str], None] = print) -> dict:
+    from quaddance.music.synth import write_demo_song
+    from quaddance.pipeline import make_dance
+    from quaddance.play.dance import target_config_for
+    from quaddance.play.metrics import feasible_mask, tracking_metrics
+    from quaddance.play.policy import OnnxPolicy, shipped_policy_path
+    from quaddance.play.rollout import rollout
+
+    policy = OnnxPolicy.load(shipped_policy_path())
+    with tempfile.TemporaryDirectory() as tmp:
+        song = Path(tmp) / "demo_song.wav"
+        write_demo_song(song)
+        dance, _ = make_dance(song, None, target_cfg=target_config_for(policy, "feasible"))
+    n = min(dance.targets_m.shape[0], round(seconds * policy.task.policy_hz))
+    feasible_max = target_config_for(policy, "feasible").max_height_m
+
+    log("quaddance dance (training simulator)")
+    t0 = time.perf_counter()
+    played = rollout(dance, policy)
+    tgt, feet = played.targets_m[:n], played.feet_m[:n]
+    dance_front = tracking_metrics(tgt, feet, feasible_mask(tgt, feasible_max))
+    dance_res = {
+        "front": dance_front,
+        "front_mae_mean_m": _mean_mae(dance_front),
+        "rear_lift_mean_m": float(np.clip(feet[:, 2:], 0, None).mean()),
+        "falls": sum(1 for t in played.falls_s if t < n / policy.task.policy_hz),
+        "wall_s": round(time.perf_counter() - t0, 2),
+    }
+
+    log(f"quaddance deploy --robot sim, {n / policy.task.policy_hz:.0f} s in real time")
+    dep = _deploy(policy, dance.targets_m[:n], n / policy.task.policy_hz)
+    deploy_res = {k: dep[k] for k in ("final_state", "duration_s", "falls", "front",
+                                      "rear_lift_mean_m", "tick_ms", "period_ms", "guards",
+                                      "overrun_ticks", "priority", "sim")}
+    deploy_res["front_mae_mean_m"] = _mean_mae(dep["front"])
+
+    faults = {}
+    for fault, at_s, dance_s in FAULT_RUNS:
+        log(f"fault {fault}@{at_s:g}")
+        s = _deploy(policy, dance.targets_m, dance_s, [(fault, at_s)])
+        (inj,) = s["injected"]
+        damp = [e for e in s["events"] if e["to"] == "damp"]
+        faults[fault] = {
+            "final_state": s["final_state"],
+            "damp_reason": damp[0]["reason"] if damp else None,
+            "time_to_damp_s": round(damp[0]["t_s"] - inj["t_s"], 4) if damp else None,
+            "deadline_s": DEADLINES_S.get(fault),
+            "falls": s["falls"],
+            "front_mae_mean_m": _mean_mae(s["front"]),
+            "sim_late_ms_max": s["sim"]["late_ms"]["max"],
+        }
+    return {
+        "song": "built-in demo song (118 BPM), feasible targets",
+        "seconds": n / policy.task.policy_hz,
+        "policy": str(shipped_policy_path().name),
+        "dance": dance_res,
+        "deploy_sim": deploy_res,
+        "faults": faults,
+        "machine": {"cpus": os.cpu_count(), "load_avg_1min": round(os.getloadavg()[0], 2)},
+    }
