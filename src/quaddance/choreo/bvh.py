@@ -31,6 +31,7 @@ TYPICAL_LEG_CHAIN_M = 0.9
 # Limits on what a BVH file may ask for, checked before the memory they drive is allocated.
 MAX_BVH_BYTES = 256 << 20  # 20 min at 120 fps of a 96-channel skeleton is about 130 MB
 MAX_JOINTS = 512  # mocap skeletons have 20-100 joints; hands and faces a few hundred
+MAX_HIERARCHY_CHARS = 1 << 20  # 512 joints take about 150 kB of text
 MAX_CHANNELS_PER_JOINT = 6  # three positions and three rotations
 MAX_VALUES = 24_000_000  # frames x channels held at once (192 MB of float64)
 MAX_JOINT_FRAMES = 12_000_000  # frames x joints of world positions (288 MB)
@@ -335,8 +336,14 @@ def load_bvh(path: str | Path, max_duration_s: float = float("inf")) -> BvhMotio
         raise InputFileError(path, f"is larger than {MAX_BVH_BYTES >> 20} MB, too big a motion")
     text = raw.decode("utf-8", errors="replace")
     del raw
-    parts = re.split(r"^\s*MOTION\s*$", text, maxsplit=1, flags=re.MULTILINE)
+    # [ \t], not \s: "\s*" can run over newlines and made this search quadratic in blank lines
+    # (100 000 of them took a minute).
+    parts = re.split(r"^[ \t]*MOTION[ \t]*\r?$", text, maxsplit=1, flags=re.MULTILINE)
     del text
+    if len(parts[0]) > MAX_HIERARCHY_CHARS:
+        raise InputFileError(
+            path, f"BVH HIERARCHY is longer than {MAX_HIERARCHY_CHARS >> 20} MB (no MOTION line?)"
+        )
     head_tokens = parts[0].split()
     if not head_tokens or head_tokens[0].upper() != "HIERARCHY":
         raise InputFileError(path, "is not a BVH file (it does not start with HIERARCHY)")

@@ -9,6 +9,10 @@ Supported formats:
   ``smpl_scaling`` (1,); y-up, 60 fps; ``smpl_trans / smpl_scaling`` is in metres.
 - BVH (``.bvh``): any skeleton whose ankles can be found by name; unit and up axis detected.
 
+Every number read is checked before it is used (type, finite, range) and every motion is at
+most `MAX_MOTION_S` (20 minutes) and `MAX_MOTION_FRAMES` long, at 1-1000 frames per second;
+anything else is an `InputFileError` naming the file and the field, in one short line.
+
 Pickles are read with `safe_load_pickle`, never plain pickle. The floor is estimated per
 sequence as a low percentile of both ankles' heights, so a foot's height is its ankle's
 height above its standing height (the foot's bottom, up to the sole thickness).

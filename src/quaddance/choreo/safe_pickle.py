@@ -501,58 +501,55 @@ def _rebuild(root: object) -> object:
     """``root`` with every stand-in replaced by its array / scalar / dtype; checks all nodes.
 
     Iterative post-order walk: refuses cycles and nesting beyond `MAX_DEPTH`. Lists and dict
-    values are replaced in place, tuples rebuilt, shared objects converted once.
+    values are replaced in place, tuples rebuilt, shared objects converted once. Leaves
+    (numbers, text, bytes) are passed over without bookkeeping: there may be millions.
     """
+    if isinstance(root, _LEAF_TYPES):
+        return root
     done: dict[int, object] = {}  # id -> converted object
-    keep_alive: list[object] = []  # ids stay unique while their objects live
-    in_progress: set[int] = set()
+    originals: list[object] = []  # keeps every converted original alive, so ids stay unique
+    on_path: set[int] = set()  # ids of the containers from the root to the current one
     stack: list[tuple[object, bool]] = [(root, False)]
+
+    def converted(child: object) -> object:
+        return child if isinstance(child, _LEAF_TYPES) else done[id(child)]
+
     while stack:
         obj, children_done = stack.pop()
         key = id(obj)
         if key in done:
             continue
-        if isinstance(obj, _LEAF_TYPES):
-            done[key] = obj
-            keep_alive.append(obj)
-            continue
         if isinstance(obj, _DtypeSpec | _ArraySpec | _ScalarSpec):
             value = obj.resolve()
             done[key] = _check_array(value) if isinstance(value, np.ndarray) else value
-            keep_alive.append(obj)
-            continue
-        if isinstance(obj, np.ndarray):  # only ever made above; checked again
-            done[key] = _check_array(obj)
-            keep_alive.append(obj)
+            originals.append(obj)
             continue
         if not isinstance(obj, list | tuple | dict | set | frozenset):
             raise _Refused(f"pickle holds a {type(obj).__name__}")
-        children = list(obj.values()) if isinstance(obj, dict) else list(obj)
-        if isinstance(obj, dict):
-            children += list(obj)
         if not children_done:
-            if key in in_progress:
-                raise _Refused("pickle holds a container that contains itself")
-            in_progress.add(key)
-            if len(in_progress) > MAX_DEPTH:
+            on_path.add(key)
+            if len(on_path) > MAX_DEPTH:
                 raise _Refused(f"containers nest deeper than {MAX_DEPTH} levels")
             stack.append((obj, True))
+            children = [*obj.values(), *obj] if isinstance(obj, dict) else obj
             for child in children:
-                if id(child) in in_progress:
+                if isinstance(child, _LEAF_TYPES) or id(child) in done:
+                    continue
+                if id(child) in on_path:
                     raise _Refused("pickle holds a container that contains itself")
                 stack.append((child, False))
             continue
-        in_progress.discard(key)
+        on_path.discard(key)
+        originals.append(obj)
         if isinstance(obj, list):
-            obj[:] = [done[id(c)] for c in obj]
+            obj[:] = [converted(c) for c in obj]
         elif isinstance(obj, dict):
             for k in obj:
-                obj[k] = done[id(obj[k])]
+                obj[k] = converted(obj[k])
         elif isinstance(obj, tuple):
-            obj = tuple(done[id(c)] for c in obj)
+            obj = tuple(converted(c) for c in obj)
         # Sets and frozensets hold only hashable leaves and tuples of them: no stand-ins.
         done[key] = obj
-        keep_alive.append(obj)
     return done[id(root)]
 
 
@@ -628,7 +625,7 @@ def safe_load_pickle(path: str | Path) -> object:
     except RecursionError:
         raise InputFileError(path, f"refused: containers nest deeper than {MAX_DEPTH}") from None
     except MemoryError:
-        raise InputFileError(path, "refused: loading it needs more memory than there is") from None
+        raise  # every allocation is bounded before it happens: running out is a bug to see
     except Exception as err:  # any other failure inside the unpickler means a bad file
         detail = re.sub(r"\s+", " ", f"{type(err).__name__}: {err}")[:120]
         raise InputFileError(
