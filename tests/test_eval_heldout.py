@@ -133,9 +133,13 @@ def test_envelope_stops_the_sweep_after_falls_in_a_row(song, monkeypatch):
         return [{**_row(), "falls_s": [2.1]}]
 
     monkeypatch.setattr(envelope, "evaluate_items", fake)
-    result = envelope.push_sweep([song], None, PinnedDynamics(), (0.5, 1.0, 1.5, 2.0))
+    vels = (0.5, 1.0, 1.5, 2.0)
+    result = envelope.push_sweep([song], None, PinnedDynamics(), vels, stop_after_falls=2)
     assert tried == [0.5, 1.0]
     assert result["first_fall_vel_m_s"] == 0.5
+    tried.clear()
+    envelope.push_sweep([song], None, PinnedDynamics(), vels)
+    assert tried == [0.5]  # by default the first velocity with a fall ends the sweep
 
 
 def _row() -> dict:
@@ -202,3 +206,54 @@ def test_without_feedforward_the_joint_targets_are_the_policy_alone():
     nominal = torch.tensor(go1.nominal_joint_pos())
     torch.testing.assert_close(targets[False], nominal)
     assert (targets[True] - nominal).abs().max() > 0.1
+
+
+def _write_curve(path: Path, err_m: list[float], gz: bool = False) -> None:
+    import gzip
+
+    lines = ["iteration,env_steps,wall_s,front_abs_err_m,rear_lift_m,fall_rate,reward_per_step"]
+    for i, e in enumerate(err_m):
+        lines.append(f"{i + 1},{(i + 1) * 125_000},{20.0 * (i + 1)},{e},0.001,0.0,-0.2")
+    text = "\n".join(lines) + "\n"
+    path.write_bytes(gzip.compress(text.encode()) if gz else text.encode())
+
+
+def test_bench_ff_ablation_compares_both_runs_with_standing_still(tmp_path):
+    run = tmp_path / "run"
+    run.mkdir()
+    _write_curve(run / "curve.csv", [0.03, 0.03, 0.025, 0.024])  # up to 0.5 M env steps
+    shipped = tmp_path / "shipped.csv.gz"
+    _write_curve(shipped, [0.03, 0.02, 0.015, 0.012, 0.01, 0.009, 0.008, 0.008], gz=True)
+    bank = np.zeros((2, 100, 4), np.float32)
+    bank[0, :50, 0] = 0.1  # mean |front target| = 0.1 * 50 / 400
+    np.save(run / "bank.npy", bank)
+    out, docs = tmp_path / "ablation.json", tmp_path / "docs"
+    args = ["bench", "ff-ablation", str(run), "--shipped-curve", str(shipped)]
+    result = CliRunner().invoke(app, [*args, "--out", str(out), "--docs", str(docs)])
+    assert result.exit_code == 0, result.output
+    data = json.loads(out.read_text())
+    assert data["standing_still_front_err_m"] == pytest.approx(0.0125)
+    no_ff = {a["env_steps"]: a for a in data["runs"]["without feed-forward"]["at"]}
+    assert no_ff[500_000]["front_abs_err_m"] == pytest.approx(0.024)
+    assert no_ff[1_000_000]["front_abs_err_m"] is None  # the run never got there
+    shipped_at = {a["env_steps"]: a for a in data["runs"]["shipped"]["at"]}
+    assert shipped_at[1_000_000]["front_abs_err_m"] == pytest.approx(0.008)
+    assert (docs / "learning_curve_no_feedforward.csv").read_bytes() == (
+        run / "curve.csv"
+    ).read_bytes()
+    assert (docs / "learning_curve_no_feedforward.png").stat().st_size > 0
+    assert (docs / "learning_curve_ff_ablation.png").stat().st_size > 0
+
+
+def test_bench_ff_ablation_without_a_run_is_one_line_and_exit_2(tmp_path, monkeypatch, capsys):
+    import sys
+
+    from quaddance.cli import main
+
+    monkeypatch.setattr(sys, "argv", ["quaddance", "bench", "ff-ablation", str(tmp_path)])
+    with pytest.raises(SystemExit) as exc:
+        main()
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("quaddance: error:")
+    assert "curve.csv" in err[0]

@@ -717,6 +717,40 @@ def bench_envelope_cmd(
     print(f"-> {out}, {report}")
 
 
+@bench_app.command("ff-ablation")
+def bench_ff_ablation_cmd(
+    run_dir: Annotated[
+        Path, typer.Argument(help="Run folder of `quaddance train --no-feedforward`.")
+    ],
+    shipped_curve: Annotated[
+        Path, typer.Option(help="Learning curve of the run with the feed-forward.")
+    ] = Path("docs/results/learning_curve.csv.gz"),
+    out: Annotated[
+        Path, typer.Option("--out", "-o", help="Where to write the JSON results.")
+    ] = Path("benchmarks/results/ff_ablation.json"),
+    docs: Annotated[
+        Path, typer.Option(help="Folder for the curve (csv, png) and the comparison plot.")
+    ] = Path("docs/results"),
+) -> None:
+    """Training without the front-lift feed-forward next to the shipped run: front-foot error
+    and rear lift at 0.25-2 M env steps against the error of standing still; copies the
+    run's curve to DOCS/learning_curve_no_feedforward.csv (+ .png) and plots both runs in
+    DOCS/learning_curve_ff_ablation.png."""
+    from quaddance.bench.ablation import run_ablation
+
+    result = run_ablation(run_dir, shipped_curve, out, docs)
+    still = result["standing_still_front_err_m"]
+    print(f"standing still: front error {100 * still:.2f} cm")
+    for name, run in result["runs"].items():
+        known = [a for a in run["at"] if a["front_abs_err_m"] is not None]
+        for a in known[-1:]:
+            print(
+                f"{name}: front error {100 * a['front_abs_err_m']:.2f} cm at "
+                f"{a['env_steps'] / 1e6:.2f} M env steps"
+            )
+    print(f"-> {out}, {docs}")
+
+
 @bench_app.command("deploy")
 def bench_deploy_cmd(
     out: Annotated[Path, typer.Option("--out", "-o", help="JSON results.")] = Path(

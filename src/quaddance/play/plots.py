@@ -119,7 +119,8 @@ def _get(row: Mapping[str, Any], *keys: str) -> float:
 
 
 def plot_eval(path: str | Path, rows: Sequence[Mapping[str, Any]]) -> Path:
-    """Eval report: per item, front-foot MAE, correlation and beat align score as bars.
+    """Eval report: per item, front-foot MAE, correlation, rear-foot lift and beat align
+    score as bars.
 
     Args:
         path: output image.
@@ -144,7 +145,7 @@ def plot_eval(path: str | Path, rows: Sequence[Mapping[str, Any]]) -> Path:
 
     plt = _pyplot()
     fig, axes = plt.subplots(
-        3, 1, figsize=(max(6.0, 1.2 * len(rows) + 3.0), 8), sharex=True, constrained_layout=True
+        4, 1, figsize=(max(6.0, 1.2 * len(rows) + 3.0), 10), sharex=True, constrained_layout=True
     )
     for ax, key, label in [(axes[0], "mae", "MAE (cm)"), (axes[1], "corr", "correlation")]:
         scale = 100.0 if key == "mae" else 1.0
@@ -167,18 +168,29 @@ def plot_eval(path: str | Path, rows: Sequence[Mapping[str, Any]]) -> Path:
     axes[1].axhline(0.0, color="0.3", lw=0.8)
     axes[1].set_ylim(-1.0, 1.0)
 
+    # Rear feet should stay down (eq. 3): mean and worst lift.
+    for j, (key, legend, alpha) in enumerate(
+        [("rear_lift_mean_m", "mean", 0.9), ("rear_lift_max_m", "max", 0.45)]
+    ):
+        values = [100.0 * _get(row, key) for row in rows]
+        axes[2].bar(x + (j - 0.5) * width, values, width, color="tab:green", alpha=alpha)
+        axes[2].bar(0, 0, 0, color="tab:green", alpha=alpha, label=legend)  # legend entry
+    axes[2].set_ylabel("rear-foot lift (cm)")
+    axes[2].legend(fontsize=8, frameon=False, ncol=2)
+    axes[2].grid(axis="y", alpha=0.3)
+
     bas = [_get(row, "bas") for row in rows]
-    axes[2].bar(x, bas, 0.5, color="tab:gray")
+    axes[3].bar(x, bas, 0.5, color="tab:gray")
     for xi, row in zip(x, rows, strict=True):
         falls = row.get("falls_s") or []
         if falls:
-            axes[2].annotate(
+            axes[3].annotate(
                 f"{len(falls)} fall(s)", (xi, 0.02), ha="center", fontsize=8, color="tab:red"
             )
-    axes[2].set_ylabel("beat align score")
-    axes[2].set_ylim(0.0, 1.0)
-    axes[2].set_xticks(x, names, rotation=20, ha="right")
-    axes[2].grid(axis="y", alpha=0.3)
+    axes[3].set_ylabel("beat align score")
+    axes[3].set_ylim(0.0, 1.0)
+    axes[3].set_xticks(x, names, rotation=20, ha="right")
+    axes[3].grid(axis="y", alpha=0.3)
     _save(fig, path)
     return Path(path)
 
