@@ -760,6 +760,9 @@ def run_beat_bench(
         },
         "soundfont": str(find_soundfont()),
         "sr_hz": sr,
+        # madmom hears 44.1 kHz renderings of the same MIDI files (its models' rate).
+        "madmom_python": None if madmom_python is None else str(madmom_python),
+        "madmom_sr_hz": None if madmom_python is None else MADMOM_SR,
         "means": means,
         "seconds_total": {k: round(v, 2) for k, v in seconds.items()},
         "songs": rows,
