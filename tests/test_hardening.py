@@ -116,8 +116,7 @@ def test_float_master_past_full_scale_is_normalised(tmp_path) -> None:
              subtype="FLOAT")  # fmt: skip
     y, _ = load_audio(path)
     assert np.all(np.isfinite(y))
-    # Divided by the file's peak sample (4): the mono mix, peak 3, ends at 0.75.
-    assert np.max(np.abs(y)) == pytest.approx(0.75, abs=0.03)
+    assert np.max(np.abs(y)) == pytest.approx(1.0)  # the mono mix, peak 3, scaled to 1
 
 
 def test_audioread_fallback_checks_its_header(tmp_path, monkeypatch) -> None:
@@ -515,3 +514,10 @@ def test_policy_json_that_is_not_json_or_not_an_object(tmp_path, text) -> None:
     with pytest.raises(InputFileError) as err:
         PolicySpec.load(path)
     assert str(err.value).startswith(str(path)) and len(str(err.value)) < 300
+
+
+def test_policy_reader_table_heights_are_the_task_s() -> None:
+    from quaddance.play import policy_spec
+    from quaddance.sim.feedforward import LUT_HEIGHTS_M
+
+    np.testing.assert_array_equal(policy_spec.LUT_HEIGHTS_M, LUT_HEIGHTS_M)

@@ -751,6 +751,29 @@ def bench_ff_ablation_cmd(
     print(f"-> {out}, {docs}")
 
 
+@bench_app.command("long")
+def bench_long_cmd(
+    out: Annotated[Path, typer.Option("--out", "-o", help="JSON results.")] = Path(
+        "benchmarks/results/long_song.json"
+    ),
+) -> None:
+    """A 20-minute song through `dance --no-video` (time, CPU, peak memory) and a 2-hour
+    file that must be refused early (a few minutes)."""
+    from rich.console import Console
+
+    from quaddance.bench.long import run_long_bench
+
+    with Console(stderr=True).status("long inputs...") as status:
+        results = run_long_bench(out, log=status.update)
+    for name in ("dance_20min_no_video", "analyze_2h_silent"):
+        r = results[name]
+        print(
+            f"{name}: exit {r['exit_code']}, {r['wall_s']:.1f} s wall, {r['cpu_s']:.1f} s CPU, "
+            f"peak {r['peak_rss_mb']:.0f} MB (load {r['load_avg_1min_before']:.1f})"
+        )
+    print(f"-> {out}")
+
+
 @bench_app.command("deploy")
 def bench_deploy_cmd(
     out: Annotated[Path, typer.Option("--out", "-o", help="JSON results.")] = Path(

@@ -7,8 +7,8 @@ decoded in blocks that are mixed to mono and resampled as they arrive, so memory
 the result (`MAX_SONG_S` at `DEFAULT_SR`: 106 MB), whatever the file's rate and channels.
 
 Sample values: NaN or infinity is refused. Float files may go past full scale (a float master
-peaking at +6 dBFS is still music): if the file's peak sample is above 1, the audio is divided
-by it, so that analysis sees ordinary levels. A peak above
+peaking at +6 dBFS is still music): if the decoded mono audio peaks above 1, it is divided by
+its peak, so that analysis sees ordinary levels and the result lies in [-1, 1]. A peak above
 `MAX_FLOAT_PEAK` (60 dB over full scale) is not audio but garbage, and is refused.
 """
 
@@ -221,7 +221,9 @@ def _decode(
     if peak < SILENCE_PEAK:
         raise InputFileError(path, "is silent (peak below -80 dBFS)")
     y = np.concatenate(out)
-    if peak > 1.0:
-        # A float master past full scale: normalise, so that analysis sees ordinary levels.
-        y /= np.float32(peak)
+    out_peak = float(np.max(np.abs(y))) if y.size else 0.0
+    if out_peak > 1.0:
+        # A float master past full scale (or resampling overshoot on a full-scale file):
+        # normalised, so that analysis sees ordinary levels and y stays in [-1, 1].
+        y /= np.float32(out_peak)
     return np.ascontiguousarray(y, dtype=np.float32)

@@ -98,8 +98,10 @@ def plot_feet(
     rear_ax.set_xlabel("time (s)")
     rear_ax.legend(loc="upper right", fontsize=8, frameon=False, ncol=3)
     for ax in axes:
-        for beat in beats:
-            ax.axvline(beat, color=BEAT_COLOUR, lw=0.8, zorder=0)
+        # One collection per panel: an axvline per beat took 35 s for a 20-minute song.
+        ax.vlines(
+            beats, 0, 1, transform=ax.get_xaxis_transform(), colors=BEAT_COLOUR, lw=0.8, zorder=0
+        )
         ax.grid(axis="y", alpha=0.3)
         if len(time):
             ax.set_xlim(time[0], time[-1])

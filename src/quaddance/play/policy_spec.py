@@ -27,8 +27,12 @@ import numpy as np
 from quaddance.errors import InputFileError
 from quaddance.sim import go1
 from quaddance.sim.config import DanceTaskCfg, DomainRandCfg, ObsCfg, RewardCfg
-from quaddance.sim.feedforward import LUT_HEIGHTS_M
 from quaddance.sim.scene import SceneCfg
+
+# The feed-forward table's heights, m: quaddance.sim.feedforward.LUT_HEIGHTS_M (a test holds
+# them equal), not imported from there because that module imports torch (4 s) and a reader
+# of this file (playback, a robot) does not need it.
+LUT_HEIGHTS_M = np.round(np.linspace(0.0, 0.45, 46), 4)
 
 FORMAT = "quaddance-policy/1"
 """Schema version written in ``format``."""
