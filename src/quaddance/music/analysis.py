@@ -120,7 +120,8 @@ class Analysis:
         sections_s: (n_sections,) start time of each section, seconds; the first is 0.0.
         duration_s: length of the audio, seconds.
         source: the file analysed, or "" for an array.
-        extra: diagnostics that are not saved (``global_tempo_bpm``: tempo before tracking).
+        extra: diagnostics that are not saved (``global_tempo_bpm``: tempo before tracking;
+            ``offbeat_shift``, ``backbeat_double``: whether those corrections were made).
     """
 
     tempo_bpm: float
@@ -620,11 +621,13 @@ def analyze(y: np.ndarray, sr: int, cfg: AnalysisConfig | None = None) -> Analys
         intervals = np.diff(beat_frames, append=2 * beat_frames[-1] - beat_frames[-2])
         beat_frames = np.round(beat_frames + shift * intervals).astype(int)
         beat_frames = beat_frames[beat_frames < len(feats.beat_onset)]
-    if _offbeat_harmony(beat_frames, feats, cfg):
+    offbeat_shift = _offbeat_harmony(beat_frames, feats, cfg)
+    if offbeat_shift:
         intervals = np.diff(beat_frames, append=2 * beat_frames[-1] - beat_frames[-2])
         beat_frames = np.round(beat_frames + 0.5 * intervals).astype(int)
         beat_frames = beat_frames[beat_frames < len(feats.beat_onset)]
-    if _backbeat_double(beat_frames, feats, cfg):
+    backbeat_double = _backbeat_double(beat_frames, feats, cfg)
+    if backbeat_double:
         midpoints = np.round(0.5 * (beat_frames[1:] + beat_frames[:-1])).astype(int)
         beat_frames = np.sort(np.concatenate([beat_frames, midpoints]))
     beat_pos = _refine(beat_frames, feats.beat_onset)
@@ -643,7 +646,11 @@ def analyze(y: np.ndarray, sr: int, cfg: AnalysisConfig | None = None) -> Analys
         env_fps=fps,
         sections_s=section_frames / fps,
         duration_s=len(y) / sr,
-        extra={"global_tempo_bpm": global_bpm},
+        extra={
+            "global_tempo_bpm": global_bpm,
+            "offbeat_shift": offbeat_shift,
+            "backbeat_double": backbeat_double,
+        },
     )
 
 
