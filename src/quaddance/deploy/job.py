@@ -15,7 +15,7 @@ ROBOTS: tuple[str, ...] = ("sim", "go1")
 
 def parse_inject(values: list[str] | None) -> list[tuple[str, float]]:
     """``["push@2.5", ...]`` -> ``[("push", 2.5), ...]`` (fault, dance time s)."""
-    from quaddance.deploy.runner import FAULTS
+    from quaddance.deploy.robot import FAULTS
 
     out = []
     for text in values or []:

@@ -8,12 +8,18 @@ thigh, calf: `quaddance.sim.go1.JOINT_NAMES`), feet in the task order (FL, FR, R
 from __future__ import annotations
 
 import abc
+import contextlib
 import os
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from quaddance.sim import go1
+
+#: Faults a backend may offer for `deploy --inject FAULT@T` (the sim backend has them all):
+#: a shove that topples the robot, the state stream stopping, a NaN encoder, +50 ms latency.
+FAULTS: tuple[str, ...] = ("push", "freeze", "nan", "lag")
 
 
 @dataclass
@@ -94,22 +100,38 @@ class Robot(abc.ABC):
         return None
 
 
-def raise_priority(rt_priority: int, nice: int = -10) -> str:
-    """Ask the OS to run this process ahead of ordinary ones, as robot control loops are run
-    (a late tick is a stale command): real-time FIFO scheduling at ``rt_priority``, else a
-    lower nice value, else nothing; returns what was granted. Needs root or CAP_SYS_NICE.
+@contextlib.contextmanager
+def realtime_priority(rt_priority: int, nice: int = -10) -> Iterator[str]:
+    """Run the block ahead of ordinary processes, as robot control loops are run (a late
+    tick is a stale command): real-time FIFO scheduling at ``rt_priority``, else a lower nice
+    value, else nothing; yields what was granted and restores the old setting after. Needs
+    root or CAP_SYS_NICE.
 
-    The loops sleep between ticks (a few % of a core), and Linux caps real-time tasks at 95 %
+    The loops sleep between ticks (a few % of a core) and Linux caps real-time tasks at 95 %
     of the CPU, so a real-time loop cannot lock the machine. Children do not inherit it.
     """
     try:
+        old_policy, old_param = os.sched_getscheduler(0), os.sched_getparam(0)
+        old_nice = os.getpriority(os.PRIO_PROCESS, 0)
+    except (OSError, AttributeError):
+        yield "normal (no scheduler control on this system)"
+        return
+    granted = "normal (no permission to raise it)"
+    try:
         policy = os.SCHED_FIFO | getattr(os, "SCHED_RESET_ON_FORK", 0)
         os.sched_setscheduler(0, policy, os.sched_param(rt_priority))
-        return f"SCHED_FIFO {rt_priority}"
-    except (PermissionError, OSError, AttributeError):
-        pass
+        granted = f"SCHED_FIFO {rt_priority}"
+    except (PermissionError, OSError):
+        try:
+            os.setpriority(os.PRIO_PROCESS, 0, nice)
+            granted = f"nice {nice}"
+        except (PermissionError, OSError):
+            pass
     try:
-        os.setpriority(os.PRIO_PROCESS, 0, nice)
-        return f"nice {nice}"
-    except (PermissionError, OSError, AttributeError):
-        return "normal (no permission to raise it)"
+        yield granted
+    finally:
+        try:
+            os.sched_setscheduler(0, old_policy, old_param)
+            os.setpriority(os.PRIO_PROCESS, 0, old_nice)
+        except (PermissionError, OSError):
+            pass  # raising needed a privilege; lowering back never fails for its owner

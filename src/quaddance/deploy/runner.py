@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from quaddance.deploy.robot import JointCommand, Reading, Robot, raise_priority
+from quaddance.deploy.robot import JointCommand, Reading, Robot, realtime_priority
 from quaddance.deploy.safety import STATES, Safety, SafetyCfg, go1_joint_range_rad
 from quaddance.errors import QuaddanceError
 from quaddance.play.policy import OnnxPolicy
@@ -37,8 +37,8 @@ from quaddance.sim.task import DanceEnv
 #: boards, in reality) is above it.
 RUNNER_RT_PRIORITY = 10
 
-#: Faults `--inject` can ask for (the sim backend implements them).
-FAULTS: tuple[str, ...] = ("push", "freeze", "nan", "lag")
+PROGRESS_S = 5.0  #: a progress line every this many dance seconds
+
 
 
 class DanceController:
@@ -233,8 +233,30 @@ class Runner:
 
     # --- the loop --------------------------------------------------------------------------
     def run(self) -> DeployResult:
+        """Connect, run the states to the end (or a stop), close; the result for the files."""
+        threads = torch.get_num_threads()
         torch.set_num_threads(1)  # one robot: threads only add latency
-        self.priority = raise_priority(RUNNER_RT_PRIORITY)
+        try:
+            with realtime_priority(RUNNER_RT_PRIORITY) as self.priority:
+                return self._run()
+        except BaseException:
+            self._emergency_damp()
+            raise
+        finally:
+            torch.set_num_threads(threads)
+
+    def _emergency_damp(self) -> None:
+        """A bug in the loop must not leave the robot holding a pose: damping, then close."""
+        q = getattr(self, "_last_q", None)
+        try:
+            if q is not None:
+                for _ in range(10):
+                    self.robot.send(JointCommand.damping(q, self.opt.safety.damp_kd))
+                    time.sleep(self.tick_s)
+        finally:
+            self.robot.close()
+
+    def _run(self) -> DeployResult:
         audio = _Audio(self.opt.song)
         if self.opt.song is not None:
             self.status(f"music: {audio.status}")
@@ -286,6 +308,8 @@ class Runner:
                     if why is not None:
                         sf.damp(why, now)
                 r = reading if reading is not None else last_reading
+                if r.is_finite():
+                    self._last_q = r.joint_pos_rad
                 if sf.state not in ("damp",) and r.is_finite():
                     last_reading = r
                     last_gravity, feet, trunk_m = self._posture(r)
@@ -344,6 +368,8 @@ class Runner:
                         sf.go("done", "dance finished", now)
                         audio.stop()
                     else:
+                        if step > 0 and step % round(PROGRESS_S / dt) == 0:
+                            self.status(f"dance {step * dt:.0f} / {self.dance_steps * dt:.0f} s")
                         targets_now = self.ctrl.targets[min(step, self.ctrl.n_steps - 1)].numpy()
                         prop, obs = self.ctrl.observe(r, step)
                         if not torch.isfinite(obs).all():

@@ -34,7 +34,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from quaddance.deploy.robot import JointCommand, Reading, Robot, raise_priority
+from quaddance.deploy.robot import FAULTS, JointCommand, Reading, Robot, realtime_priority
 from quaddance.deploy.safety import effort_limits_nm
 from quaddance.errors import QuaddanceError
 from quaddance.sim import go1
@@ -47,7 +47,6 @@ LOOPBACK = "127.0.0.1"
 _STATE = struct.Struct("<cIdd35f")
 _CMD = struct.Struct("<cI60f")  # kind, seq, q 12, dq 12, kp 12, kd 12, tau_ff 12
 _FAULT = struct.Struct("<c8s")
-FAULTS: tuple[str, ...] = ("push", "freeze", "nan", "lag")
 SIM_RT_PRIORITY = 20  #: above the runner's: the robot's own boards never wait for the PC
 
 
@@ -308,9 +307,9 @@ def _main(argv: list[str] | None = None) -> None:
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    raise_priority(SIM_RT_PRIORITY)
-    proc = _SimProcess(cfg, args.runner_port)
-    proc.run(args.truth)
+    with realtime_priority(SIM_RT_PRIORITY):
+        proc = _SimProcess(cfg, args.runner_port)
+        proc.run(args.truth)
 
 
 # --- the runner's side ---------------------------------------------------------------------
