@@ -84,6 +84,14 @@ def test_render_song_truth_matches_its_tempo_map() -> None:
     assert np.array_equal(y, y2)  # same seed, same song
 
 
+@pytest.mark.parametrize("tempo_bpm", [40.0, 62.0, 63.0, 200.0])
+def test_render_song_fills_the_last_bar_at_any_tempo(tempo_bpm: float) -> None:
+    # 62 BPM x 20 s ends a bar exactly on the grid's last beat (an IndexError before).
+    y, truth = render_song(tempo_bpm, 20.0, seed=0)
+    assert y.shape == (20 * SR,) and np.isfinite(y).all()
+    assert truth.beats_s[-1] < 20.0 and np.allclose(np.diff(truth.beats_s), 60.0 / tempo_bpm)
+
+
 # --- beat tracking ----------------------------------------------------------------------------
 
 

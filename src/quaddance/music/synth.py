@@ -194,7 +194,8 @@ def render_song(
     offbeat = 0.5 + swing / 6.0
 
     def time_at(beat: float) -> float:
-        whole = int(np.floor(beat))
+        # The last bar's end can be the grid's last beat: extend its final interval.
+        whole = min(int(np.floor(beat)), len(grid_s) - 2)
         return float(grid_s[whole] + (beat - whole) * (grid_s[whole + 1] - grid_s[whole]))
 
     section_change_s: list[float] = []
