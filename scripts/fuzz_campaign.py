@@ -4,7 +4,9 @@
 
 Case kinds (shares of ``--cases``): mutated EDGE/AIST++/hostile pickles, crafted hostile
 pickles with random parameters (nesting depth, dtype code and flags, array shapes, integer
-sizes), mutated BVH text and bytes, random bytes; plus whole Hypothesis runs (BVH and pickle
+sizes), mutated BVH text and bytes, random bytes; a fixed set of large inputs (20 MB lines,
+millions of blank lines, 500-joint skeletons, 3 M-opcode pickles, oversized files); plus
+whole Hypothesis runs (BVH and pickle
 properties, new examples each run) and ``--cli`` cases through the real ``quaddance
 choreograph --motion``. Every case runs in a child process under a 2 GiB address-space limit
 and a timeout (`tests/fuzz_harness.py`). Outcomes per kind go to
@@ -85,6 +87,15 @@ def build_cases(n: int, seed: int, workdir: Path, sentinel: str) -> dict[str, li
     bvh_texts = cases.valid_bvh_texts(rng)
     bvh_bytes = [t.encode() for t in bvh_texts]
     paths: dict[str, list[Path]] = {kind: [] for kind in SHARES}
+    paths["large_inputs"] = []
+    for name, data in cases.large_cases(rng).items():
+        paths["large_inputs"].append(workdir / f"large_{name}")
+        paths["large_inputs"][-1].write_bytes(data)
+    for suffix in (".pkl", ".bvh"):  # over the size limit, written sparse (no disk used)
+        path = workdir / f"large_oversize{suffix}"
+        with path.open("wb") as f:
+            f.truncate(300 << 20)
+        paths["large_inputs"].append(path)
     for kind, share in SHARES.items():
         for i in range(round(n * share)):
             if kind == "pickle_mutation":

@@ -368,3 +368,59 @@ def mutate_text(text: str, rng: np.random.Generator) -> str:
         else:
             lines = lines[: i + 1]
     return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------------
+# large inputs: algorithmic blow-ups (quadratic searches, per-item bookkeeping) show only here
+
+
+def _chain_bvh(n_joints: int, n_frames: int) -> str:
+    """A skeleton of two legs and a spine of ``n_joints`` joints, ``n_frames`` zero frames."""
+    spine = "".join(
+        f"JOINT s{i}\n{{\nOFFSET 0 1 0\nCHANNELS 3 Zrotation Xrotation Yrotation\n"
+        for i in range(n_joints)
+    )
+    spine += "End Site\n{\nOFFSET 0 1 0\n}\n" + "}\n" * n_joints
+    hierarchy = BVH_HIERARCHY.rstrip().removesuffix("}") + spine + "}\n"
+    row = " ".join(["0"] * (BVH_CHANNELS + 3 * n_joints))
+    return f"{hierarchy}MOTION\nFrames: {n_frames}\nFrame Time: 0.01\n" + (row + "\n") * n_frames
+
+
+def shared_dag_pickle(depth: int, width: int) -> bytes:
+    """``full_pose`` = a list of ``width`` references to one list of ``width`` references ...
+    ``depth`` levels down to a float: tiny file, width**depth numbers when expanded."""
+    # Built with the memo: each level memoizes the previous and repeats it width times.
+    ops = bytearray(b"G\x3f\xf0\x00\x00\x00\x00\x00\x00\x940")  # value, memo 0, pop
+    for level in range(depth):
+        ops += b"(" + (b"j" + struct.pack("<I", level)) * width + b"l\x940"
+    ops += b"j" + struct.pack("<I", depth)
+    return b"\x80\x04}" + _unicode("full_pose") + bytes(ops) + b"s."
+
+
+def large_cases(rng: np.random.Generator) -> dict[str, bytes]:
+    """Big or expansion-heavy motion files, each a few MB at most on disk."""
+    valid_long = valid_bvh(20_000, 1 / 120, rng)
+    head = valid_bvh(10, 1 / 120, rng).split("MOTION")[0]
+    floats = [[[float(v) for v in frame] for frame in rng.normal(0, 0.3, (24, 3))]] * 3000
+    return {
+        "bvh_blank_lines.bvh": b"HIERARCHY\n" + b"\n" * 2_000_000 + b"ROOT x",
+        "bvh_blank_lines_motion.bvh": (head + "MOTION" + "\n" * 2_000_000).encode(),
+        "bvh_long_valid.bvh": valid_long.encode(),
+        "bvh_long_mutated.bvh": mutate_text(valid_long, rng).encode(),
+        "bvh_one_line.bvh": (head + "MOTION\nFrames: 200000\nFrame Time: 0.005\n").encode()
+        + b"0.5 " * 4_800_000,
+        "bvh_header_claims_1m_frames.bvh": (head + "MOTION\nFrames: 1000000\n").encode()
+        + b"Frame Time: 0.001\n0 0 0\n",
+        "bvh_500_joints.bvh": _chain_bvh(480, 1000).encode(),
+        "bvh_600_joints.bvh": _chain_bvh(600, 10).encode(),
+        "bvh_spaces.bvh": b"HIERARCHY" + b" " * 20_000_000 + b"\nMOTION\n",
+        "bvh_frame_words.bvh": b"HIERARCHY\nMOTION\n" + b"Frame " * 2_000_000,
+        "pickle_float_lists.pkl": pickle.dumps({"full_pose": floats}, protocol=2),
+        "pickle_float_lists_p0.pkl": pickle.dumps({"full_pose": floats[:300]}, protocol=0),
+        "pickle_shared_dag.pkl": shared_dag_pickle(60, 2),
+        "pickle_shared_dag_wide.pkl": shared_dag_pickle(20, 16),
+        "pickle_many_keys.pkl": pickle.dumps({i: i for i in range(1_000_000)}, protocol=4),
+        "pickle_too_many_opcodes.pkl": b"\x80\x04(" + b"N" * 3_100_000 + b"l.",
+        "pickle_big_bytes.pkl": pickle.dumps({"x": bytes(20 << 20)}, protocol=4),
+        "pickle_long_list.pkl": pickle.dumps({"full_pose": [0.5] * 2_900_000}, protocol=4),
+    }

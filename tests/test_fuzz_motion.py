@@ -24,6 +24,7 @@ from motion_fuzz_cases import (
     mutate_bytes,
     mutate_text,
     object_array_pickle,
+    shared_dag_pickle,
     valid_bvh_texts,
     valid_motion_pickles,
 )
@@ -142,6 +143,8 @@ _HOSTILE_NUMBERS: list[tuple[str, object, str]] = [
     ("huge_value.bvh", _bvh().replace("100.0000", "1e300", 1), "value beyond +-1e+07"),
     ("arabic_value.bvh", _bvh().replace("100.0000", "\u0661\u0660\u0660", 1), "non-ASCII"),
     ("long_name.bvh", _bvh().replace("LeftFoot", "x" * 900_000), "joints: Hips"),
+    # 2**60 numbers when expanded, from a 500-byte file of shared lists.
+    ("shared_lists.pkl", shared_dag_pickle(60, 2), "'full_pose' is not a numeric array"),
     # Blank lines made the MOTION search quadratic: 300 000 of them hung for hours.
     ("blank_lines.bvh", "HIERARCHY\n" + "\n" * 300_000 + "x", "no MOTION block"),
     ("huge_hierarchy.bvh", "HIERARCHY\n" + "ab " * 400_000 + "\nMOTION\n", "longer than 1 MB"),
@@ -154,6 +157,8 @@ def test_hostile_numbers_are_refused_with_a_short_line_naming_the_field(tmp_path
         path = tmp_path / name
         if isinstance(content, str):
             path.write_text(content, encoding="utf-8")
+        elif isinstance(content, bytes):
+            path.write_bytes(content)
         else:
             path.write_bytes(pickle.dumps(content, protocol=4))
         paths.append(path)

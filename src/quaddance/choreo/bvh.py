@@ -302,7 +302,9 @@ def _motion_values(path: Path, data: str, n_frames: int, n_channels: int) -> np.
     return flat.reshape(n_frames, n_channels)
 
 
-def load_bvh(path: str | Path, max_duration_s: float = float("inf")) -> BvhMotion:
+def load_bvh(
+    path: str | Path, max_duration_s: float = float("inf"), max_frames: int | None = None
+) -> BvhMotion:
     """Read a BVH file and compute world joint positions for every frame.
 
     Parameters
@@ -311,6 +313,8 @@ def load_bvh(path: str | Path, max_duration_s: float = float("inf")) -> BvhMotio
         The ``.bvh`` file.
     max_duration_s : float
         Longest motion accepted, seconds; checked from the header before the frames are read.
+    max_frames : int, optional
+        Most frames accepted, checked likewise.
 
     Returns
     -------
@@ -366,6 +370,10 @@ def load_bvh(path: str | Path, max_duration_s: float = float("inf")) -> BvhMotio
             path,
             f"BVH motion is {n_frames} frames x {frame_time_s:g} s = "
             f"{n_frames * frame_time_s:.0f} s, longer than the {max_duration_s:g} s allowed",
+        )
+    if max_frames is not None and n_frames > max_frames:
+        raise InputFileError(
+            path, f"BVH Frames: {n_frames} is more than the {max_frames} frames allowed"
         )
     if n_frames * len(joints) > MAX_JOINT_FRAMES:
         raise InputFileError(

@@ -141,23 +141,48 @@ def _listing(names: list[str]) -> str:
     return text[:_MAX_MESSAGE_LIST] + (" ..." if cut else "")
 
 
+_NUMBER_TYPES = frozenset(
+    [int, float]
+    + [np.dtype(c).type for c in ("i1", "i2", "i4", "i8", "u1", "u2", "u4", "u8")]
+    + [np.float16, np.float32, np.float64]
+)
+
+
 def _count_numbers(value: object, limit: int) -> int | None:
-    """Numbers in nested lists/tuples (shared parts counted each time), None if any leaf is
-    not an int or float or the count passes ``limit`` (walked without recursion)."""
-    count, stack = 0, [value]
+    """Numbers in nested lists/tuples as `np.asarray` would expand them (a list shared many
+    times counts each time), or None if a leaf is not an int or float (bools and text are
+    not) or the count passes ``limit``. Each distinct list is visited once, without
+    recursion, so a small file of shared lists cannot make this slow."""
+    if type(value) in _NUMBER_TYPES:
+        return 1
+    if not isinstance(value, list | tuple):
+        return None
+    counts: dict[int, int] = {}
+    expanding: set[int] = set()  # met again before it is counted: a cycle
+    stack: list[tuple[list[Any] | tuple[Any, ...], bool]] = [(value, False)]
     while stack:
-        item = stack.pop()
-        if isinstance(item, list | tuple):
-            stack.extend(item)
-        elif isinstance(item, int | float | np.integer | np.floating) and not isinstance(
-            item, bool | np.bool_
-        ):
-            count += 1
-            if count > limit:
+        item, expanded = stack.pop()
+        if id(item) in counts:
+            continue
+        if not expanded:
+            if id(item) in expanding:
                 return None
-        else:
+            expanding.add(id(item))
+            stack.append((item, True))
+            stack += [(c, False) for c in item if isinstance(c, list | tuple)]
+            continue
+        total = 0
+        for child in item:
+            if type(child) in _NUMBER_TYPES:
+                total += 1
+            elif isinstance(child, list | tuple) and id(child) in counts:
+                total += counts[id(child)]
+            else:
+                return None
+        if total > limit:
             return None
-    return count
+        counts[id(item)] = total
+    return counts[id(value)]
 
 
 def _array(
@@ -269,7 +294,7 @@ def _motion_from_pickle(path: Path, cfg: MotionImportConfig) -> tuple[float, np.
 
 def _motion_from_bvh(path: Path, cfg: MotionImportConfig) -> tuple[float, np.ndarray, str]:
     """(fps, ankle heights (T, 2) in metres with any origin, description) from a BVH file."""
-    motion = bvh.load_bvh(path, max_duration_s=cfg.max_duration_s)
+    motion = bvh.load_bvh(path, cfg.max_duration_s, MAX_MOTION_FRAMES)
     _check_length(path, motion.positions.shape[0], motion.fps, cfg)
     ankles = bvh.find_ankles(motion.joint_names)
     if ankles is None:

@@ -41,13 +41,13 @@ from quaddance.errors import InputFileError
 #: Largest pickle read, bytes. A 20-minute AIST++ motion at 60 fps is about 40 MB.
 MAX_PICKLE_BYTES = 256 << 20
 #: Most opcodes in one pickle: arrays are one opcode of raw bytes each, so only a motion
-#: written as Python lists of numbers comes near this (5 M numbers is 20 min of 72 values
-#: at 60 fps).
-MAX_OPCODES = 6_000_000
+#: written as Python lists of numbers comes near this (3 M numbers: 11 min of 72 values at
+#: 60 fps). Scanning 3 M opcodes takes a few seconds.
+MAX_OPCODES = 3_000_000
 #: Deepest container nesting; motion files nest 3 levels (dict -> array state -> shape).
 MAX_DEPTH = 64
 #: Most items one container may hold (bounded anyway by the opcode count).
-MAX_CONTAINER_ITEMS = 6_000_000
+MAX_CONTAINER_ITEMS = 3_000_000
 #: Largest integer magnitude (bits); motion files hold frame counts and rates.
 MAX_INT_BITS = 64
 #: Most elements of one array (the raw bytes must be in the file as well).
@@ -527,17 +527,21 @@ def _rebuild(root: object) -> object:
         if not isinstance(obj, list | tuple | dict | set | frozenset):
             raise _Refused(f"pickle holds a {type(obj).__name__}")
         if not children_done:
-            on_path.add(key)
-            if len(on_path) > MAX_DEPTH:
+            if len(on_path) >= MAX_DEPTH:
                 raise _Refused(f"containers nest deeper than {MAX_DEPTH} levels")
-            stack.append((obj, True))
             children = [*obj.values(), *obj] if isinstance(obj, dict) else obj
-            for child in children:
-                if isinstance(child, _LEAF_TYPES) or id(child) in done:
-                    continue
+            inner = [c for c in children if not isinstance(c, _LEAF_TYPES)]
+            if not inner:  # numbers and text only: nothing to convert
+                done[key] = obj
+                originals.append(obj)
+                continue
+            on_path.add(key)
+            stack.append((obj, True))
+            for child in inner:
                 if id(child) in on_path:
                     raise _Refused("pickle holds a container that contains itself")
-                stack.append((child, False))
+                if id(child) not in done:
+                    stack.append((child, False))
             continue
         on_path.discard(key)
         originals.append(obj)
