@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import os
 import tempfile
-import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -37,46 +36,74 @@ def _mean_mae(front: dict | None) -> float | None:
     return float(np.mean(vals)) if vals else None
 
 
-def run(seconds: float = 20.0, log: Callable[[str], None] = print) -> dict:
-    from quaddance.music.synth import write_demo_song
+#: Songs made by code (music.synth), besides the demo song: (name, tempo BPM, render args).
+EXTRA_SONGS: tuple[tuple[str, float, dict], ...] = (
+    ("96 BPM swing", 96.0, {"seed": 7, "swing": 0.3}),
+    ("140 BPM syncopated", 140.0, {"seed": 11, "syncopation": True}),
+)
+
+
+def _songs(tmp: Path, seconds: float) -> list[tuple[str, Path]]:
+    import soundfile as sf
+
+    from quaddance.music.synth import render_song, write_demo_song
+
+    demo = tmp / "demo_song.wav"
+    write_demo_song(demo)
+    songs = [("demo song (118 BPM)", demo)]
+    for name, bpm, kwargs in EXTRA_SONGS:
+        y, _ = render_song(bpm, seconds + 1.0, **kwargs)
+        path = tmp / f"song_{round(bpm)}.wav"
+        sf.write(path, y, 22050)
+        songs.append((name, path))
+    return songs
+
+
+def _compare(policy, song: Path, seconds: float, log) -> tuple[dict, np.ndarray]:
+    """The song's first ``seconds`` by `dance` and by `deploy --robot sim`."""
     from quaddance.pipeline import make_dance
     from quaddance.play.dance import target_config_for
     from quaddance.play.metrics import feasible_mask, tracking_metrics
-    from quaddance.play.policy import OnnxPolicy, shipped_policy_path
     from quaddance.play.rollout import rollout
 
-    policy = OnnxPolicy.load(shipped_policy_path())
-    with tempfile.TemporaryDirectory() as tmp:
-        song = Path(tmp) / "demo_song.wav"
-        write_demo_song(song)
-        dance, _ = make_dance(song, None, target_cfg=target_config_for(policy, "feasible"))
+    dance, _ = make_dance(song, None, target_cfg=target_config_for(policy, "feasible"))
     n = min(dance.targets_m.shape[0], round(seconds * policy.task.policy_hz))
     feasible_max = target_config_for(policy, "feasible").max_height_m
-
-    log("quaddance dance (training simulator)")
-    t0 = time.perf_counter()
     played = rollout(dance, policy)
     tgt, feet = played.targets_m[:n], played.feet_m[:n]
-    dance_front = tracking_metrics(tgt, feet, feasible_mask(tgt, feasible_max))
+    front = tracking_metrics(tgt, feet, feasible_mask(tgt, feasible_max))
     dance_res = {
-        "front": dance_front,
-        "front_mae_mean_m": _mean_mae(dance_front),
+        "front": front,
+        "front_mae_mean_m": _mean_mae(front),
         "rear_lift_mean_m": float(np.clip(feet[:, 2:], 0, None).mean()),
         "falls": sum(1 for t in played.falls_s if t < n / policy.task.policy_hz),
-        "wall_s": round(time.perf_counter() - t0, 2),
     }
-
-    log(f"quaddance deploy --robot sim, {n / policy.task.policy_hz:.0f} s in real time")
+    log(f"  deploy --robot sim, {n / policy.task.policy_hz:.0f} s in real time")
     dep = _deploy(policy, dance.targets_m[:n], n / policy.task.policy_hz)
     deploy_res = {k: dep[k] for k in ("final_state", "duration_s", "falls", "front",
                                       "rear_lift_mean_m", "tick_ms", "period_ms", "guards",
                                       "overrun_ticks", "priority", "sim")}
     deploy_res["front_mae_mean_m"] = _mean_mae(dep["front"])
+    return {"seconds": n / policy.task.policy_hz, "dance": dance_res,
+            "deploy_sim": deploy_res}, dance.targets_m
+
+
+def run(seconds: float = 20.0, log: Callable[[str], None] = print) -> dict:
+    from quaddance.play.policy import OnnxPolicy, shipped_policy_path
+
+    policy = OnnxPolicy.load(shipped_policy_path())
+    songs = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for i, (name, path) in enumerate(_songs(Path(tmp), seconds)):
+            log(f"{name}: dance, then deploy")
+            songs[name], targets = _compare(policy, path, seconds, log)
+            if i == 0:
+                demo_targets = targets
 
     faults = {}
     for fault, at_s, dance_s in FAULT_RUNS:
         log(f"fault {fault}@{at_s:g}")
-        s = _deploy(policy, dance.targets_m, dance_s, [(fault, at_s)])
+        s = _deploy(policy, demo_targets, dance_s, [(fault, at_s)])
         (inj,) = s["injected"]
         damp = [e for e in s["events"] if e["to"] == "damp"]
         faults[fault] = {
@@ -89,11 +116,9 @@ def run(seconds: float = 20.0, log: Callable[[str], None] = print) -> dict:
             "sim_late_ms_max": s["sim"]["late_ms"]["max"],
         }
     return {
-        "song": "built-in demo song (118 BPM), feasible targets",
-        "seconds": n / policy.task.policy_hz,
+        "what": "feasible targets; dance = training simulator, deploy_sim = real-time sim robot",
         "policy": str(shipped_policy_path().name),
-        "dance": dance_res,
-        "deploy_sim": deploy_res,
+        "songs": songs,
         "faults": faults,
         "machine": {"cpus": os.cpu_count(), "load_avg_1min": round(os.getloadavg()[0], 2)},
     }
