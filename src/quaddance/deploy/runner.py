@@ -188,6 +188,23 @@ def _enter_pressed() -> bool | None:
     return None if sys.stdin.readline() == "" else True
 
 
+@dataclass
+class _Tick:
+    """What one tick read, decided and sent (one row of log.npz)."""
+
+    now: float  #: runner clock, s
+    reading: Reading
+    state_before: str
+    t_dance: float = math.nan
+    cmd: JointCommand | None = None
+    tau_est: np.ndarray = field(default_factory=lambda: np.full(go1.NUM_JOINTS, np.nan))
+    action: np.ndarray = field(default_factory=lambda: np.full(go1.NUM_JOINTS, np.nan))
+    feet: np.ndarray = field(default_factory=lambda: np.full(4, np.nan))
+    targets: np.ndarray = field(default_factory=lambda: np.full(4, np.nan))
+    held: bool = False
+    infer_s: float = math.nan
+
+
 class Runner:
     """Drives one robot through passive -> stand -> ready -> dance -> done (or damp)."""
 
@@ -257,182 +274,194 @@ class Runner:
             self.robot.close()
 
     def _run(self) -> DeployResult:
-        audio = _Audio(self.opt.song)
+        self.audio = _Audio(self.opt.song)
         if self.opt.song is not None:
-            self.status(f"music: {audio.status}")
+            self.status(f"music: {self.audio.status}")
         self.status(f"connecting to the robot ({self.robot.name})")
         first = self.robot.start()
         sf, dt = self.safety, self.tick_s
         rows: dict[str, list] = {k: [] for k in _LOG_KEYS}
-        injections = sorted(self.opt.inject, key=lambda f: f[1])
-        injected: list[dict] = []
-        last_cmd = sf.damping_command(first.joint_pos_rad)
-        last_reading = first
-        last_gravity = np.array([0.0, 0.0, -1.0])
-        dance_start: float | None = None
-        dance_end_s: float | None = None
-        done_from: np.ndarray | None = None
-        overruns = 0
-        last_seq = -1
-        stop_reason = ""
+        self.injections = sorted(self.opt.inject, key=lambda f: f[1])
+        self.injected: list[dict] = []
+        self.last_cmd = sf.damping_command(first.joint_pos_rad)
+        self.dance_start: float | None = None  # runner clock at dance time 0
+        self.dance_end_s: float | None = None  # dance time when the dance stopped
+        self.done_from: np.ndarray | None = None  # targets when `done` began
+        self.finished = False
+        last_reading, last_gravity = first, np.array([0.0, 0.0, -1.0])
+        overruns, last_seq = 0, -1
         t0 = time.monotonic()
         sf.entered_s = t0
         self.status("passive (damping); soft start follows")
         k = 0
-        with _Stop() as stop:
-            while True:
-                wake = t0 + k * dt
-                pause = wake - time.monotonic()
+        with _Stop() as self.stop:
+            while not self.finished:
+                pause = t0 + k * dt - time.monotonic()
                 if pause > 0:
                     time.sleep(pause)
                 elif pause < -dt:
                     # Missed whole ticks (machine stalled): skip them rather than burst.
-                    missed = int(-pause / dt)
-                    overruns += missed
-                    k += missed
+                    overruns += int(-pause / dt)
+                    k += int(-pause / dt)
                 now = time.monotonic()
-                t_dance = now - dance_start if dance_start is not None else math.nan
                 reading = self.robot.read()
-                state_before = sf.state
-                held = False
-                infer_s = math.nan
-                action = np.full(go1.NUM_JOINTS, np.nan)
-                feet = np.full(4, np.nan)
-                tau_est = np.full(go1.NUM_JOINTS, np.nan)
-                targets_now = np.full(4, np.nan)
-
-                if stop.signal is not None:
-                    sf.damp(f"signal {signal.Signals(stop.signal).name}", now)
-                if sf.state != "damp":
-                    why = sf.check_reading(reading)
-                    if why is not None:
-                        sf.damp(why, now)
                 r = reading if reading is not None else last_reading
+                tick = _Tick(now=now, reading=r, state_before=sf.state)
+                if self.dance_start is not None:
+                    tick.t_dance = now - self.dance_start
+
+                # Checks first: whatever the state, they may end it in `damp`.
+                if self.stop.signal is not None:
+                    sf.damp(f"signal {signal.Signals(self.stop.signal).name}", now)
+                if sf.state != "damp" and (why := sf.check_reading(reading)) is not None:
+                    sf.damp(why, now)
                 if r.is_finite():
                     self._last_q = r.joint_pos_rad
-                if sf.state not in ("damp",) and r.is_finite():
+                if sf.state != "damp" and r.is_finite():
                     last_reading = r
-                    last_gravity, feet, trunk_m = self._posture(r)
-                    if sf.state not in ("passive",) and not (
-                        sf.state == "done" and now - sf.entered_s >= self.opt.safety.done_stand_s
-                    ):
-                        why = sf.check_posture(last_gravity, trunk_m)
-                        if why is not None:
-                            sf.damp(why, now)
+                    last_gravity, tick.feet, trunk_m = self._posture(r)
+                    why = sf.check_posture(last_gravity, trunk_m)
+                    if why is not None and self._posture_matters(now):
+                        sf.damp(why, now)
 
-                # --- state machine ---
+                # Then the state's command; a state may hand over to the next in this tick.
                 if sf.state == "passive":
-                    cmd = sf.damping_command(r.joint_pos_rad)
-                    if now - sf.entered_s >= self.opt.safety.passive_s:
-                        sf.stand_from = r.joint_pos_rad.copy()
-                        sf.go("stand", "soft start", now)
-                        self.status("stand: soft start to the nominal pose")
+                    self._passive(tick)
                 if sf.state == "stand":
-                    target, kp = sf.stand_target(now)
-                    cmd, tau_est = sf.guard(target, kp, r)
-                    if now - sf.entered_s >= self.opt.safety.stand_s:
-                        sf.go("ready", "standing", now)
-                        self.status(
-                            "ready: dancing in 0.5 s" if self.opt.auto_start
-                            else "ready: press Enter to dance (Ctrl-C stops)"
-                        )
+                    self._stand(tick)
                 elif sf.state == "ready":
-                    cmd, tau_est = sf.guard(sf.nominal_rad, sf.kp, r)
-                    go = False
-                    if self.opt.auto_start:
-                        go = now - sf.entered_s >= self.opt.safety.ready_settle_s
-                    else:
-                        pressed = _enter_pressed()
-                        if pressed is None:
-                            sf.go("done", "stdin closed: nobody to press Enter", now)
-                            done_from = sf.last_target
-                        go = bool(pressed)
-                    if go:
-                        self.ctrl.reset(r)
-                        dance_start = now
-                        t_dance = 0.0
-                        sf.go("dance", "start", now)
-                        audio.start()
-                        self.status(f"dance: {self.dance_steps * dt:.1f} s")
+                    self._ready(tick)
                 if sf.state == "dance":
-                    step = round(t_dance / dt)
-                    while injections and injections[0][1] <= t_dance + 1e-9:
-                        name, at_s = injections.pop(0)
-                        ok = self.robot.inject(name)
-                        injected.append({"fault": name, "at_s": at_s, "t_s": round(t_dance, 4),
-                                         "sent": ok})
-                        self.status(f"injected {name} at {t_dance:.2f} s")
-                    if step >= self.dance_steps:
-                        dance_end_s = t_dance
-                        done_from = sf.last_target
-                        sf.go("done", "dance finished", now)
-                        audio.stop()
-                    else:
-                        if step > 0 and step % round(PROGRESS_S / dt) == 0:
-                            self.status(f"dance {step * dt:.0f} / {self.dance_steps * dt:.0f} s")
-                        targets_now = self.ctrl.targets[min(step, self.ctrl.n_steps - 1)].numpy()
-                        prop, obs = self.ctrl.observe(r, step)
-                        if not torch.isfinite(obs).all():
-                            sf.damp("NaN/Inf in the observation", now)
-                        else:
-                            t_inf = time.perf_counter()
-                            act = torch.from_numpy(self.policy.act(obs.numpy()))
-                            infer_s = time.perf_counter() - t_inf
-                            action = act[0].numpy().astype(np.float64)
-                            if not torch.isfinite(act).all():
-                                sf.damp("NaN/Inf in the action", now)
-                            elif infer_s > self.opt.safety.inference_budget_s:
-                                # Too late to be the answer to this state: keep the last
-                                # command and the last action the policy will see.
-                                held = True
-                                sf.counts.held_inference += 1
-                                self.ctrl.commit(prop, self.ctrl.last_action)
-                                cmd = last_cmd
-                            else:
-                                self.ctrl.commit(prop, act.clamp(-10.0, 10.0))
-                                target = self.ctrl.joint_targets(self.ctrl.last_action)
-                                cmd, tau_est = sf.guard(target[0].numpy().astype(np.float64),
-                                                        sf.kp, r)
+                    self._dance(tick)
                 if sf.state == "done":
-                    into = now - sf.entered_s
-                    if into < self.opt.safety.done_stand_s:
-                        start = done_from if done_from is not None else sf.nominal_rad
-                        u = into / self.opt.safety.done_stand_s
-                        target = start + (u * u * (3 - 2 * u)) * (sf.nominal_rad - start)
-                        cmd, tau_est = sf.guard(target, sf.kp, r)
-                    elif into < self.opt.safety.done_stand_s + self.opt.safety.done_damp_s:
-                        cmd = sf.damping_command(r.joint_pos_rad)
-                    else:
-                        stop_reason = "done"
+                    self._done(tick)
                 if sf.state == "damp":
-                    if state_before != "damp":
-                        audio.stop()
-                        self.status(f"DAMP: {sf.events[-1].reason}")
-                        if dance_start is not None and dance_end_s is None:
-                            dance_end_s = t_dance
-                    cmd = sf.damping_command(r.joint_pos_rad)
-                    # After a signal the user wants out: 0.2 s of damping commands suffice.
-                    hold_s = 0.2 if stop.signal is not None else self.opt.safety.damp_hold_s
-                    if now - sf.entered_s >= hold_s:
-                        stop_reason = "damp"
-                if not cmd.is_finite():
+                    self._damp(tick)
+                cmd = tick.cmd
+                if cmd is None or not cmd.is_finite():
                     sf.damp("NaN/Inf in the command", now)
-                    cmd = sf.damping_command(np.nan_to_num(r.joint_pos_rad))
+                    cmd = sf.damping_command(r.joint_pos_rad)
                 self.robot.send(cmd)
-                last_cmd = cmd
+                self.last_cmd = cmd
                 work_ms = (time.monotonic() - now) * 1e3
                 new = reading is not None and reading.seq != last_seq
                 last_seq = r.seq
-                _append(rows, t_dance, now - t0, r, new, sf.state, last_gravity,
-                        feet, cmd, tau_est, action, targets_now, held, infer_s, work_ms)
+                _append(rows, tick, now - t0, new, sf.state, last_gravity, cmd, work_ms)
                 k += 1
-                if stop_reason:
-                    break
-        audio.stop()
+        self.audio.stop()
         self.robot.close()
-        if dance_start is not None and dance_end_s is None:
-            dance_end_s = rows["t_s"][-1]
-        return self._result(rows, dance_start, t0, dance_end_s, injected, overruns, audio)
+        if self.dance_start is not None and self.dance_end_s is None:
+            self.dance_end_s = rows["t_s"][-1]
+        return self._result(rows, self.dance_start, t0, self.dance_end_s, self.injected,
+                            overruns, self.audio)
+
+    def _posture_matters(self, now: float) -> bool:
+        """Roll, pitch and trunk height are checked from `stand` until `done` damps."""
+        sf = self.safety
+        if sf.state in ("passive", "damp"):
+            return False
+        return not (sf.state == "done" and now - sf.entered_s >= self.opt.safety.done_stand_s)
+
+    # --- one method per state: each sets tick.cmd (and may change the state) ----------------
+    def _passive(self, tick: _Tick) -> None:
+        sf = self.safety
+        tick.cmd = sf.damping_command(tick.reading.joint_pos_rad)
+        if tick.now - sf.entered_s >= self.opt.safety.passive_s:
+            sf.stand_from = tick.reading.joint_pos_rad.copy()  # the soft start begins here
+            sf.go("stand", "soft start", tick.now)
+            self.status("stand: soft start to the nominal pose")
+
+    def _stand(self, tick: _Tick) -> None:
+        sf = self.safety
+        target, kp = sf.stand_target(tick.now)
+        tick.cmd, tick.tau_est = sf.guard(target, kp, tick.reading)
+        if tick.now - sf.entered_s >= self.opt.safety.stand_s:
+            sf.go("ready", "standing", tick.now)
+            self.status(
+                f"ready: dancing in {self.opt.safety.ready_settle_s:g} s" if self.opt.auto_start
+                else "ready: press Enter to dance (Ctrl-C stops)"
+            )
+
+    def _ready(self, tick: _Tick) -> None:
+        sf = self.safety
+        tick.cmd, tick.tau_est = sf.guard(sf.nominal_rad, sf.kp, tick.reading)
+        if self.opt.auto_start:
+            start = tick.now - sf.entered_s >= self.opt.safety.ready_settle_s
+        else:
+            pressed = _enter_pressed()
+            if pressed is None:
+                self.done_from = sf.last_target
+                sf.go("done", "stdin closed: nobody to press Enter", tick.now)
+                return
+            start = pressed
+        if start:
+            self.ctrl.reset(tick.reading)
+            self.dance_start, tick.t_dance = tick.now, 0.0
+            sf.go("dance", "start", tick.now)
+            self.audio.start()  # the music's first sample is dance time 0
+            self.status(f"dance: {self.dance_steps * self.tick_s:.1f} s")
+
+    def _dance(self, tick: _Tick) -> None:
+        sf, dt, now, t = self.safety, self.tick_s, tick.now, tick.t_dance
+        step = round(t / dt)  # wall-clock time, not tick count: the music does not wait
+        while self.injections and self.injections[0][1] <= t + 1e-9:
+            name, at_s = self.injections.pop(0)
+            sent = self.robot.inject(name)
+            self.injected.append({"fault": name, "at_s": at_s, "t_s": round(t, 4), "sent": sent})
+            self.status(f"injected {name} at {t:.2f} s")
+        if step >= self.dance_steps:
+            self.dance_end_s, self.done_from = t, sf.last_target
+            sf.go("done", "dance finished", now)
+            self.audio.stop()
+            return
+        if step > 0 and step % round(PROGRESS_S / dt) == 0:
+            self.status(f"dance {step * dt:.0f} / {self.dance_steps * dt:.0f} s")
+        tick.targets = self.ctrl.targets[min(step, self.ctrl.n_steps - 1)].numpy()
+        prop, obs = self.ctrl.observe(tick.reading, step)
+        if not torch.isfinite(obs).all():
+            sf.damp("NaN/Inf in the observation", now)
+            return
+        t_inf = time.perf_counter()
+        act = torch.from_numpy(self.policy.act(obs.numpy()))
+        tick.infer_s = time.perf_counter() - t_inf
+        tick.action = act[0].numpy().astype(np.float64)
+        if not torch.isfinite(act).all():
+            sf.damp("NaN/Inf in the action", now)
+        elif tick.infer_s > self.opt.safety.inference_budget_s:
+            # Too late to answer this state: the last command stays, and so does the
+            # action the policy will see as its last.
+            tick.held = True
+            sf.counts.held_inference += 1
+            self.ctrl.commit(prop, self.ctrl.last_action)
+            tick.cmd = self.last_cmd
+        else:
+            self.ctrl.commit(prop, act.clamp(-10.0, 10.0))  # the task's action clamp
+            target = self.ctrl.joint_targets(self.ctrl.last_action)[0].numpy()
+            tick.cmd, tick.tau_est = sf.guard(target.astype(np.float64), sf.kp, tick.reading)
+
+    def _done(self, tick: _Tick) -> None:
+        sf, cfg = self.safety, self.opt.safety
+        into = tick.now - sf.entered_s
+        if into < cfg.done_stand_s:  # back to the nominal stand
+            start = self.done_from if self.done_from is not None else sf.nominal_rad
+            u = into / cfg.done_stand_s
+            target = start + (u * u * (3 - 2 * u)) * (sf.nominal_rad - start)
+            tick.cmd, tick.tau_est = sf.guard(target, sf.kp, tick.reading)
+        else:  # then lie down under damping
+            tick.cmd = sf.damping_command(tick.reading.joint_pos_rad)
+            self.finished = into >= cfg.done_stand_s + cfg.done_damp_s
+
+    def _damp(self, tick: _Tick) -> None:
+        sf = self.safety
+        if tick.state_before != "damp":
+            self.audio.stop()
+            self.status(f"DAMP: {sf.events[-1].reason}")
+            if self.dance_start is not None and self.dance_end_s is None:
+                self.dance_end_s = tick.t_dance
+        tick.cmd = sf.damping_command(tick.reading.joint_pos_rad)
+        # After a signal the user wants out: 0.2 s of damping commands suffice.
+        hold_s = 0.2 if self.stop.signal is not None else self.opt.safety.damp_hold_s
+        self.finished = tick.now - sf.entered_s >= hold_s
 
     def _result(self, rows, dance_start, t0, dance_end_s, injected, overruns, audio):
         from quaddance.play.dance import target_config_for
@@ -519,14 +548,16 @@ _LOG_KEYS = (
 )
 
 
-def _append(rows, t_dance, wall_s, r: Reading, new: bool, state: str, gravity, feet,
-            cmd: JointCommand, tau_est, action, targets, held, infer_s, work_ms) -> None:
+def _append(rows, tick: _Tick, wall_s: float, new: bool, state: str, gravity,
+            cmd: JointCommand, work_ms: float) -> None:
+    r = tick.reading
     vals = {
-        "t_s": t_dance, "wall_s": wall_s, "seq": r.seq, "new_state": new, "age_s": r.age_s,
+        "t_s": tick.t_dance, "wall_s": wall_s, "seq": r.seq, "new_state": new, "age_s": r.age_s,
         "state": STATES.index(state), "q": r.joint_pos_rad, "dq": r.joint_vel_rad_s,
-        "q_target": cmd.q_rad, "kp": cmd.kp[0], "kd": cmd.kd[0], "tau_est_nm": tau_est,
-        "gyro": r.gyro_rad_s, "gravity": gravity, "feet_est_m": feet, "action": action,
-        "targets_m": targets, "held": held, "inference_ms": infer_s * 1e3, "tick_ms": work_ms,
+        "q_target": cmd.q_rad, "kp": cmd.kp[0], "kd": cmd.kd[0], "tau_est_nm": tick.tau_est,
+        "gyro": r.gyro_rad_s, "gravity": gravity, "feet_est_m": tick.feet,
+        "action": tick.action, "targets_m": tick.targets, "held": tick.held,
+        "inference_ms": tick.infer_s * 1e3, "tick_ms": work_ms,
     }
     for k, v in vals.items():
         rows[k].append(np.array(v, copy=True))
