@@ -129,7 +129,9 @@ def _parse_hierarchy(tokens: list[str], path: Path) -> list[_Joint]:
                 raise InputFileError(path, "BVH End Site has a child joint")
             if len(joints) >= MAX_JOINTS:
                 raise InputFileError(path, f"BVH hierarchy has more than {MAX_JOINTS} joints")
-            name = " ".join(name_parts)[:100] or f"joint{len(joints)}"
+            # Printable only: names end up in messages and logs (no terminal escapes).
+            name = "".join(c if c.isprintable() else "?" for c in " ".join(name_parts)[:100])
+            name = name or f"joint{len(joints)}"
             joints.append(_Joint(name, parent, np.zeros(3), []))
             stack.append(len(joints) - 1)
         elif key == "END":

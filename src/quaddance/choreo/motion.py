@@ -188,12 +188,15 @@ def _count_numbers(value: object, limit: int) -> int | None:
 def _array(
     path: Path, data: dict[str, Any], key: str, shape: tuple[int | None, ...], max_abs: float
 ) -> np.ndarray:
-    """``data[key]`` as a float array of ``shape`` (None: any length) with |values| <= max_abs."""
+    """``data[key]`` as a float array of ``shape`` (None: any length, at most
+    `MAX_MOTION_FRAMES`) with |values| <= max_abs; shape and length are checked before the
+    float copy is made."""
     value = data[key]
     limit = MAX_MOTION_FRAMES * 3 * smpl.N_JOINTS
     if isinstance(value, np.ndarray):
         if value.dtype.kind not in "iuf":
             raise InputFileError(path, f"'{key}' is a {value.dtype} array, not real numbers")
+        _check_shape(path, key, value.shape, shape)
     elif _count_numbers(value, limit) is None:
         raise InputFileError(
             path, f"'{key}' is not a numeric array (or has more than {limit} numbers)"
@@ -204,13 +207,7 @@ def _array(
             value = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError, OverflowError):
         raise InputFileError(path, f"'{key}' is not a numeric array") from None
-    if value.ndim != len(shape) or any(
-        want is not None and got != want for got, want in zip(value.shape, shape, strict=True)
-    ):
-        want_text = "(" + ", ".join("T" if s is None else str(s) for s in shape) + ")"
-        raise InputFileError(
-            path, f"'{key}' has shape {value.shape}, expected {want_text} for this format"
-        )
+    _check_shape(path, key, value.shape, shape)
     if not np.all(np.isfinite(value)):
         raise InputFileError(path, f"'{key}' contains NaN or infinite values")
     if value.size and np.max(np.abs(value)) > max_abs:
@@ -218,6 +215,19 @@ def _array(
             path, f"'{key}' has values up to {np.max(np.abs(value)):.3g}, beyond +-{max_abs:g}"
         )
     return value
+
+
+def _check_shape(path: Path, key: str, got: tuple[int, ...], want: tuple[int | None, ...]) -> None:
+    """Refuse ``got`` unless it matches ``want`` (None: any length up to the frame limit)."""
+    if len(got) != len(want) or any(
+        w is not None and g != w for g, w in zip(got, want, strict=True)
+    ):
+        want_text = "(" + ", ".join("T" if s is None else str(s) for s in want) + ")"
+        raise InputFileError(path, f"'{key}' has shape {got}, expected {want_text} for this format")
+    if got and got[0] > MAX_MOTION_FRAMES:
+        raise InputFileError(
+            path, f"motion is too long: '{key}' has {got[0]} frames, at most {MAX_MOTION_FRAMES}"
+        )
 
 
 def _number(path: Path, data: dict[str, Any], key: str, low: float, high: float) -> float:
