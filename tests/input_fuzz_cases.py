@@ -246,8 +246,8 @@ def mutate_policy(base: dict[str, Any], rng: np.random.Generator) -> str:
                 parent[f"new{int(rng.integers(0, 9))}"] = hostile_json_value(rng)
             elif isinstance(parent[last], int | float) and not isinstance(parent[last], bool):
                 parent[last] = parent[last] * float(rng.choice([0.5, 2.0, -1.0, 1.0001]))
-        except (KeyError, IndexError, TypeError):
-            continue  # the path went away with an earlier edit
+        except (KeyError, IndexError, TypeError, OverflowError):
+            continue  # the path went away with an earlier edit, or a huge int was nudged
     text = json.dumps(obj)
     if rng.random() < 0.2:
         text = mutate_text(text, rng)

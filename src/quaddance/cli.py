@@ -898,9 +898,18 @@ def _stop_on_signals() -> dict[int, int]:
 def main() -> None:
     """Console entry point: user errors become one line on stderr and exit status 2; Ctrl-C
     and SIGTERM one line and exit status 130 / 143 (outputs complete or absent)."""
+    import signal
+
     received = _stop_on_signals()
     try:
-        app()
+        try:
+            app()
+        finally:
+            # The work is over (done, failed or interrupted): a signal during the exit must
+            # neither raise in the handlers below nor kill the process silently (at shutdown
+            # Python restores the default action, which would end it with no message).
+            for signum in (signal.SIGINT, signal.SIGTERM):
+                signal.signal(signum, signal.SIG_IGN)
     except QuaddanceError as err:
         print(one_line_error(err), file=sys.stderr)
         sys.exit(2)
