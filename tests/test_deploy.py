@@ -6,9 +6,11 @@ Fault deadlines are measured in dance time from the run's own log, not by timing
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -33,6 +35,29 @@ DEPLOY_KEYS = {
     "rear_lift_mean_m", "tick_ms", "sim",
 }
 LOG_KEYS = {"t_s", "q", "dq", "q_target", "tau_est_nm", "gyro", "gravity", "state"}
+
+
+@pytest.fixture(autouse=True)
+def loopback_only(monkeypatch):
+    """Every datagram these tests send goes to 127.0.0.0/8 (the simulated robot), never to a
+    robot's address; the SDK's own UDP link is never constructed."""
+    real_sendto = socket.socket.sendto
+
+    def sendto(sock, data, *args):
+        host = args[-1][0]
+        assert ipaddress.ip_address(host).is_loopback, f"packet to {host}"
+        return real_sendto(sock, data, *args)
+
+    monkeypatch.setattr(socket.socket, "sendto", sendto)
+    try:
+        from unitree_legged_sdk import robot_interface
+    except ImportError:
+        return
+
+    def no_udp(*args, **kwargs):
+        raise AssertionError("a test constructed the SDK's UDP link")
+
+    monkeypatch.setattr(robot_interface, "UDP", no_udp)
 
 
 @pytest.fixture(scope="module")

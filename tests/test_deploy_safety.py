@@ -150,3 +150,31 @@ def test_deploy_job_refuses_bad_settings(tmp_path, bad):
             run_deploy(DeployJob(out_dir=tmp_path, demo=True, dance=tmp_path / "x.npz"))
         else:
             parse_inject(["push@-1"])
+
+
+def test_sigterm_damps_and_ends_the_run():
+    import os
+    import signal
+    import threading
+
+    from quaddance.pipeline import target_bank
+
+    policy = OnnxPolicy.load(shipped_policy_path())
+    cfg = SafetyCfg(passive_s=0.1, stand_s=2.0, gain_ramp_s=1.0, ready_settle_s=0.1)
+    runner = Runner(StandingRobot(), policy, target_bank(1, 10.0, seed=2)[0],
+                    DeployOptions(auto_start=True, safety=cfg))
+    # SIGTERM 1 s into the dance (passive 0.1 + stand 2.0 + ready 0.1 s before it).
+    timer = threading.Timer(3.2, os.kill, (os.getpid(), signal.SIGTERM))
+    before = signal.getsignal(signal.SIGTERM)
+    timer.start()
+    try:
+        result = runner.run()
+    finally:
+        timer.cancel()
+    summary, log = result.summary, result.log
+    assert summary["final_state"] == "damp"
+    assert summary["events"][-1]["reason"] == "signal SIGTERM"
+    assert 0.5 < summary["duration_s"] < 2.0
+    damping = log["state"] == STATES.index("damp")
+    assert damping[-1] and (log["kp"][damping] == 0).all()
+    assert signal.getsignal(signal.SIGTERM) is before  # its handler only while it ran

@@ -177,6 +177,19 @@ class _Audio:
             self.proc.terminate()
 
 
+def _drain_stdin() -> None:
+    """Discard lines already typed (stops at end of input: `_enter_pressed` reports that)."""
+    for _ in range(1000):
+        try:
+            ready, _, _ = select.select([sys.stdin], [], [], 0)
+        except (ValueError, OSError):
+            return
+        if not ready:
+            return
+        if sys.stdin.readline() == "":
+            return
+
+
 def _enter_pressed() -> bool | None:
     """True if a line came on stdin, False if none yet, None when stdin is closed."""
     try:
@@ -376,6 +389,8 @@ class Runner:
         target, kp = sf.stand_target(tick.now)
         tick.cmd, tick.tau_est = sf.guard(target, kp, tick.reading)
         if tick.now - sf.entered_s >= self.opt.safety.stand_s:
+            if not self.opt.auto_start:
+                _drain_stdin()  # an Enter typed before the prompt must not start the dance
             sf.go("ready", "standing", tick.now)
             self.status(
                 f"ready: dancing in {self.opt.safety.ready_settle_s:g} s" if self.opt.auto_start
