@@ -148,7 +148,8 @@ class Go1Robot(Robot):
             if cmd is not None:
                 fill_low_cmd(self._low_cmd, cmd)
                 self._safe.PositionLimit(self._low_cmd)
-                if self._safe.PowerProtect(self._low_cmd, self._low_state, self.power_level) < 0:
+                # Non-zero: the SDK intervened (it scales the command down and warns).
+                if self._safe.PowerProtect(self._low_cmd, self._low_state, self.power_level):
                     self.power_protect_trips += 1
             self._udp.SetSend(self._low_cmd)
             self._udp.Send()
