@@ -33,7 +33,7 @@ def reading(seq: int, q=NOMINAL, dq=None, quat=(1.0, 0.0, 0.0, 0.0)) -> Reading:
 
 def safety(**cfg) -> Safety:
     return Safety(SafetyCfg(**cfg), kp=20.0, kd=0.5, nominal_rad=NOMINAL,
-                  joint_range_rad=go1_joint_range_rad(), tick_s=0.02)
+                  joint_range_rad=go1_joint_range_rad())
 
 
 def test_guard_keeps_targets_in_range_step_and_torque_limits():

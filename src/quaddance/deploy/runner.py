@@ -246,7 +246,6 @@ class Runner:
             kd=policy.spec.kd,
             nominal_rad=np.asarray(policy.spec.nominal_joint_pos_rad, dtype=np.float64),
             joint_range_rad=go1_joint_range_rad(),
-            tick_s=self.tick_s,
         )
         self.geom = self.ctrl.actor_obs.geom
 
@@ -558,7 +557,7 @@ class Runner:
 
 _LOG_KEYS = (
     "t_s", "wall_s", "seq", "new_state", "age_s", "state", "q", "dq", "q_target", "kp", "kd",
-    "tau_est_nm", "gyro", "gravity", "feet_est_m", "action", "targets_m", "held",
+    "tau_est_nm", "gyro", "gravity", "foot_force", "feet_est_m", "action", "targets_m", "held",
     "inference_ms", "tick_ms",
 )
 
@@ -570,7 +569,8 @@ def _append(rows, tick: _Tick, wall_s: float, new: bool, state: str, gravity,
         "t_s": tick.t_dance, "wall_s": wall_s, "seq": r.seq, "new_state": new, "age_s": r.age_s,
         "state": STATES.index(state), "q": r.joint_pos_rad, "dq": r.joint_vel_rad_s,
         "q_target": cmd.q_rad, "kp": cmd.kp[0], "kd": cmd.kd[0], "tau_est_nm": tick.tau_est,
-        "gyro": r.gyro_rad_s, "gravity": gravity, "feet_est_m": tick.feet,
+        "gyro": r.gyro_rad_s, "gravity": gravity, "foot_force": r.foot_force_n,
+        "feet_est_m": tick.feet,
         "action": tick.action, "targets_m": tick.targets, "held": tick.held,
         "inference_ms": tick.infer_s * 1e3, "tick_ms": work_ms,
     }

@@ -106,7 +106,6 @@ class Safety:
     kd: float
     nominal_rad: np.ndarray
     joint_range_rad: np.ndarray
-    tick_s: float
     state: str = "passive"
     events: list[Event] = field(default_factory=list)
     counts: GuardCounts = field(default_factory=GuardCounts)
