@@ -58,7 +58,8 @@ class SimRobotCfg:
     pd_hz: float = 1000.0  #: robot-side PD rate; Go1 motor boards run >= 500 Hz (FACTS 2)
     state_hz: float = 500.0  #: LowState rate of the SDK's 2 ms example loop (FACTS 6)
     #: Sensor-to-actuation delay, drawn per message, split evenly between the state and the
-    #: command direction, ms: Go1 users report 5-20 ms over the SDK's UDP link and driver.
+    #: command direction, ms: the range issue 9 names as realistic for a Go1 over the SDK
+    #: (training saw 0-30 ms of action lag).
     latency_ms: tuple[float, float] = (5.0, 20.0)
     lag_extra_ms: float = 50.0  #: added to the state stream by the ``lag`` fault
     #: Half of legged_gym's uniform noise scales (0.01 rad, 1.5 rad/s, 0.2 rad/s), as a
@@ -122,7 +123,7 @@ class _SimProcess:
         self.tau = np.zeros(go1.NUM_JOINTS)
         self.seq = 0
         self.frozen = False
-        self.nan_next = False
+        self.encoder_failed = False
         self.extra_lag_s = 0.0
         self.running = True
         self.foot_geoms = [self.model.geom(f"{f}_foot_collision").id for f in go1.FEET]
@@ -179,7 +180,7 @@ class _SimProcess:
             self.frozen = True
             self.state_queue.clear()  # a dead link delivers nothing more
         elif name == "nan":
-            self.nan_next = True  # a failed encoder: NaN from now on
+            self.encoder_failed = True  # joint 0's encoder reads NaN from now on
         elif name == "lag":
             self.extra_lag_s += self.cfg.lag_extra_ms / 1e3
 
@@ -217,7 +218,7 @@ class _SimProcess:
                     forces[foot] += self._force[0]
                 elif other in self.trunk_geoms:
                     trunk_contact = True
-        if self.nan_next:
+        if self.encoder_failed:
             q[0] = np.nan
         self.seq += 1
         self._record_truth(trunk_contact, mono_s)
