@@ -521,3 +521,21 @@ def test_policy_reader_table_heights_are_the_task_s() -> None:
     from quaddance.sim.feedforward import LUT_HEIGHTS_M
 
     np.testing.assert_array_equal(policy_spec.LUT_HEIGHTS_M, LUT_HEIGHTS_M)
+
+
+def test_dance_file_with_an_unparsable_array_header(tmp_path) -> None:
+    """Found by the fuzz campaign: an unbalanced bracket made numpy raise TokenError."""
+    import warnings
+    import zipfile
+
+    from quaddance.dancefile import load_dance
+
+    path = tmp_path / "tok.npz"
+    np.savez(path, **_dance_arrays())
+    header = b"{'descr': '<f8', 'fortran_order': False, 'shape': ((3,), }".ljust(118) + b"\n"
+    member = b"\x93NUMPY\x01\x00" + len(header).to_bytes(2, "little") + header + bytes(24)
+    with warnings.catch_warnings(), zipfile.ZipFile(path, "a") as zf:
+        warnings.simplefilter("ignore")  # the duplicate name is the point: np.load reads it
+        zf.writestr("fps.npy", member)
+    with pytest.raises(InputFileError, match=r"tok.npz: cannot read as a dance .npz"):
+        load_dance(path)

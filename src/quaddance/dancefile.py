@@ -22,6 +22,7 @@ version        () unicode   quaddance version that wrote the file
 from __future__ import annotations
 
 import struct
+import tokenize
 import zipfile
 import zlib
 from dataclasses import dataclass
@@ -33,10 +34,12 @@ from quaddance.errors import InputFileError
 from quaddance.fileio import atomic_path
 
 # What a damaged archive raises: zipfile and zlib errors, NotImplementedError (unknown
-# compression method), RuntimeError (encrypted member), struct.error (cut headers).
+# compression method), RuntimeError (encrypted member), struct.error (cut headers), and from
+# numpy's parsing of a damaged array header SyntaxError and tokenize.TokenError (found by the
+# fuzz campaign: an unbalanced bracket in the header).
 _ARCHIVE_ERRORS = (
     OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError,
-    RuntimeError, struct.error,
+    RuntimeError, struct.error, SyntaxError, tokenize.TokenError,
 )  # fmt: skip
 _MODES = ("feasible", "paper", "minmax")  # quaddance.targets.MODES (not imported: keep this light)
 
