@@ -42,7 +42,7 @@ RANGE_ENDS: dict[str, PinnedDynamics] = {
 }
 
 #: Push velocities of part 2, m/s (training pushes: up to 0.5 m/s per axis every 8 s).
-PUSH_VELS_M_S: tuple[float, ...] = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0)
+PUSH_VELS_M_S: tuple[float, ...] = (0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 2.5, 3.0)
 
 #: A fall this soon after a push is the push's doing, s.
 FALL_AFTER_PUSH_S = 3.0
@@ -67,8 +67,16 @@ def default_items(folder: Path) -> list[Path]:
 
 
 def _row_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """The means over items (`summarize`) and, per item, its falls and front-foot tracking."""
     s = summarize(rows)
-    s["falls_per_item"] = {r["name"]: len(r["falls_s"]) for r in rows}
+    s["per_item"] = {
+        r["name"]: {
+            "falls_s": r["falls_s"],
+            "front": r["front"],
+            "rear_lift_max_m": r["rear_lift_max_m"],
+        }
+        for r in rows
+    }
     return s
 
 
