@@ -220,22 +220,26 @@ def damp_after(summary: dict, fault: str) -> float:
     return damp[0]["t_s"] - inj["t_s"]
 
 
-def test_sim_deploy_dances_through_lag_with_a_soft_start_inside_torque_limits(policy, tmp_path):
-    targets = dance_targets(policy, 6.0)
-    summary, log = run_sim(policy, targets, tmp_path, 6.0, inject=[("lag", 3.0)])
+def test_sim_deploy_of_a_song_dances_through_lag_with_a_soft_start_in_torque_limits(
+    policy, tmp_path, demo_song
+):
+    from quaddance.pipeline import make_dance
+
+    dance, _ = make_dance(demo_song[0], None, target_cfg=target_config_for(policy, "feasible"))
+    summary, log = run_sim(policy, dance.targets_m, tmp_path, 20.0, inject=[("lag", 15.0)])
     assert set(summary) >= DEPLOY_KEYS and set(log) >= LOG_KEYS
     assert summary["final_state"] == "done", summary["events"]
     assert [e["to"] for e in summary["events"]] == ["stand", "ready", "dance", "done"]
     assert summary["falls"] == 0
-    assert summary["duration_s"] == pytest.approx(6.0, abs=0.05)
+    assert summary["duration_s"] == pytest.approx(20.0, abs=0.05)
     maes = [summary["front"][f]["mae_m"] for f in ("fl", "fr")]
     assert max(maes) <= 0.02, maes
     assert summary["rear_lift_mean_m"] < 0.01
     assert summary["sim"]["physics_dt_s"] == 0.001 and summary["sim"]["pd_hz"] >= 500
-    # The lag reached the runner (states 50 ms older after 3 s) and the dance went on.
+    # The lag reached the runner (states 50 ms older after 15 s) and the dance went on.
     dancing = log["state"] == STATES.index("dance")
-    age_before = np.median(log["age_s"][dancing & (log["t_s"] < 2.9)])
-    age_after = np.median(log["age_s"][dancing & (log["t_s"] > 3.3)])
+    age_before = np.median(log["age_s"][dancing & (log["t_s"] < 14.9)])
+    age_after = np.median(log["age_s"][dancing & (log["t_s"] > 15.3)])
     assert age_after - age_before > 0.04, (age_before, age_after)
     # Soft start: the torque the motor boards start each tick from, before any guard,
     # stayed in the motor limits, and it took >= 2 s.
@@ -244,7 +248,6 @@ def test_sim_deploy_dances_through_lag_with_a_soft_start_inside_torque_limits(po
     assert (np.abs(log["tau_est_nm"][standing]) <= effort_limits_nm()).all()
     stand_s = log["wall_s"][standing][-1] - log["wall_s"][standing][0]
     assert stand_s >= 2.0 - 0.03
-    assert summary["tick_ms"]["p50"] > 0
 
 
 @pytest.mark.parametrize(

@@ -67,6 +67,7 @@ class DanceController:
             else None
         )
         self.step = 0  # dance step (policy ticks since dance time 0)
+        self._fade: tuple[torch.Tensor, int, int] | None = None
         self.last_action = torch.zeros(1, go1.NUM_JOINTS)
         self._ids = torch.zeros(1, dtype=torch.long)
 
@@ -75,8 +76,18 @@ class DanceController:
         return int(self.targets.shape[0])
 
     def targets_at(self, ahead_steps: int) -> torch.Tensor:
-        """(1, 4) targets ``ahead_steps`` ticks from the current step (held at the end)."""
-        return self.targets[min(self.step + ahead_steps, self.n_steps - 1)][None]
+        """(1, 4) targets ``ahead_steps`` ticks from the current step (held at the end; faded
+        to 0 after `fade_out`)."""
+        k = self.step + ahead_steps
+        if self._fade is not None:
+            row, first, n = self._fade
+            return row * max(0.0, 1.0 - (k - first) / n)
+        return self.targets[min(k, self.n_steps - 1)][None]
+
+    def fade_out(self, steps: int) -> None:
+        """From the current step on, targets go linearly from their value now to 0 (all
+        feet down) over ``steps`` ticks."""
+        self._fade = (self.targets_at(0).clone(), self.step, max(1, steps))
 
     @staticmethod
     def measurement(reading: Reading) -> Measurement:
@@ -89,6 +100,7 @@ class DanceController:
     def reset(self, reading: Reading) -> None:
         """Dance time 0: no previous action, the history filled with the current frame."""
         self.step = 0
+        self._fade = None
         self.last_action = torch.zeros(1, go1.NUM_JOINTS)
         prop = self.actor_obs.proprio(self.measurement(reading), self.last_action)
         self.actor_obs.reset(self._ids, prop)
@@ -367,12 +379,17 @@ class Runner:
         return self._result(rows, self.dance_start, t0, self.dance_end_s, self.injected,
                             overruns, self.audio)
 
+    def _done_standing_s(self) -> float:
+        """How long `done` keeps the robot standing (settle + stand) before damping."""
+        cfg = self.opt.safety
+        return (cfg.done_settle_s if self.dance_start is not None else 0.0) + cfg.done_stand_s
+
     def _posture_matters(self, now: float) -> bool:
         """Roll, pitch and trunk height are checked from `stand` until `done` damps."""
         sf = self.safety
         if sf.state in ("passive", "damp"):
             return False
-        return not (sf.state == "done" and now - sf.entered_s >= self.opt.safety.done_stand_s)
+        return not (sf.state == "done" and now - sf.entered_s >= self._done_standing_s())
 
     # --- one method per state: each sets tick.cmd (and may change the state) ----------------
     def _passive(self, tick: _Tick) -> None:
@@ -416,7 +433,7 @@ class Runner:
             self.status(f"dance: {self.dance_steps * self.tick_s:.1f} s")
 
     def _dance(self, tick: _Tick) -> None:
-        sf, dt, now, t = self.safety, self.tick_s, tick.now, tick.t_dance
+        sf, dt, t = self.safety, self.tick_s, tick.t_dance
         step = round(t / dt)  # wall-clock time, not tick count: the music does not wait
         while self.injections and self.injections[0][1] <= t + 1e-9:
             name, at_s = self.injections.pop(0)
@@ -424,14 +441,20 @@ class Runner:
             self.injected.append({"fault": name, "at_s": at_s, "t_s": round(t, 4), "sent": sent})
             self.status(f"injected {name} at {t:.2f} s")
         if step >= self.dance_steps:
-            self.dance_end_s, self.done_from = t, sf.last_target
-            sf.go("done", "dance finished", now)
+            self.dance_end_s = t
+            self.ctrl.fade_out(round(self.opt.safety.done_fade_s / dt))
+            sf.go("done", "dance finished", tick.now)
             self.audio.stop()
             return
         if step > 0 and step % round(PROGRESS_S / dt) == 0:
             self.status(f"dance {step * dt:.0f} / {self.dance_steps * dt:.0f} s")
-        tick.targets = self.ctrl.targets[min(step, self.ctrl.n_steps - 1)].numpy()
+        self._policy_step(tick, step)
+
+    def _policy_step(self, tick: _Tick, step: int) -> None:
+        """Observe, act, command: the policy's tick at dance step ``step``."""
+        sf, now = self.safety, tick.now
         prop, obs = self.ctrl.observe(tick.reading, step)
+        tick.targets = self.ctrl.targets_at(0)[0].numpy()
         if not torch.isfinite(obs).all():
             sf.damp("NaN/Inf in the observation", now)
             return
@@ -454,16 +477,21 @@ class Runner:
             tick.cmd, tick.tau_est = sf.guard(target.astype(np.float64), sf.kp, tick.reading)
 
     def _done(self, tick: _Tick) -> None:
+        """Settle (the policy, targets fading to feet down), PD to the stand, then damping."""
         sf, cfg = self.safety, self.opt.safety
         into = tick.now - sf.entered_s
-        if into < cfg.done_stand_s:  # back to the nominal stand
+        settle_s = cfg.done_settle_s if self.dance_start is not None else 0.0
+        if into < settle_s:
+            self._policy_step(tick, round((tick.now - self.dance_start) / self.tick_s))
+            self.done_from = sf.last_target
+        elif into < settle_s + cfg.done_stand_s:
             start = self.done_from if self.done_from is not None else sf.nominal_rad
-            u = into / cfg.done_stand_s
+            u = (into - settle_s) / cfg.done_stand_s
             target = start + (u * u * (3 - 2 * u)) * (sf.nominal_rad - start)
             tick.cmd, tick.tau_est = sf.guard(target, sf.kp, tick.reading)
-        else:  # then lie down under damping
+        else:  # lie down under damping
             tick.cmd = sf.damping_command(tick.reading.joint_pos_rad)
-            self.finished = into >= cfg.done_stand_s + cfg.done_damp_s
+            self.finished = into >= settle_s + cfg.done_stand_s + cfg.done_damp_s
 
     def _damp(self, tick: _Tick) -> None:
         sf = self.safety
@@ -515,7 +543,7 @@ class Runner:
             end = np.inf
             done = [e for e in self.safety.events if e.to == "done"]
             if self.safety.state == "done" and done:
-                end = done[-1].clock_s + self.opt.safety.done_stand_s
+                end = done[-1].clock_s + self._done_standing_s()
             fallen &= (truth["mono_s"] >= start) & (truth["mono_s"] < end)
             falls = int(np.count_nonzero(np.diff(fallen.astype(int), prepend=0) == 1))
         else:

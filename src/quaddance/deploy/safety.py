@@ -59,7 +59,12 @@ class SafetyCfg:
     stand_s: float = 2.5  #: soft start duration (the issue asks >= 2 s; unitree_rl_gym: 2 s)
     gain_ramp_s: float = 1.5  #: kp ramps from 0 to the policy's kp over this part of it
     ready_settle_s: float = 0.5  #: --auto-start waits this long in `ready`
-    done_stand_s: float = 1.5  #: after the dance: back to the nominal pose
+    #: After the dance the policy keeps balancing while the front targets fade to 0 (feet
+    #: down: what it was trained to stand on) over `done_fade_s`, for `done_settle_s` in all;
+    #: a bare PD move from a lifted leg to the stand can tip the robot (it did, with lag).
+    done_settle_s: float = 1.0
+    done_fade_s: float = 0.4
+    done_stand_s: float = 1.0  #: then PD back to the exact nominal pose
     done_damp_s: float = 1.0  #: then damping before the runner exits
     damp_hold_s: float = 1.0  #: damping commands sent after a fault before exiting
     damp_kd: float = 1.0  #: N m s / rad, joint damping of the damping mode
