@@ -273,3 +273,11 @@ def test_eval_rejects_bad_choices(song, tmp_path, flags, needle):
     assert result.exit_code == 2
     assert needle in result.output
     assert not (tmp_path / "r.md").exists()
+
+
+def test_eval_title_flag_heads_the_report(song, tmp_path, captured):
+    report = tmp_path / "r.md"
+    args = ["eval", str(song), "-o", str(report), "--title", "Set X, nominal"]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    assert report.read_text().startswith("# Set X, nominal\n")
