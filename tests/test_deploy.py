@@ -31,8 +31,16 @@ from quaddance.play.policy import OnnxPolicy, shipped_policy_path
 from quaddance.sim import go1
 
 DEPLOY_KEYS = {
-    "robot", "policy", "duration_s", "falls", "final_state", "events", "front",
-    "rear_lift_mean_m", "tick_ms", "sim",
+    "robot",
+    "policy",
+    "duration_s",
+    "falls",
+    "final_state",
+    "events",
+    "front",
+    "rear_lift_mean_m",
+    "tick_ms",
+    "sim",
 }
 LOG_KEYS = {"t_s", "q", "dq", "q_target", "tau_est_nm", "gyro", "gravity", "state"}
 
@@ -76,9 +84,16 @@ def dance_targets(policy: OnnxPolicy, seconds: float, seed: int = 3) -> np.ndarr
 def as_dance(targets: np.ndarray) -> Dance:
     n = targets.shape[0]
     return Dance(
-        fps=50.0, time_s=np.arange(n) / 50.0, human_feet_m=targets[:, :2].copy(),
-        targets_m=targets, beats_s=np.zeros(0), downbeats_s=np.zeros(0), mode="feasible",
-        source="test", seed=0, version=quaddance.__version__,
+        fps=50.0,
+        time_s=np.arange(n) / 50.0,
+        human_feet_m=targets[:, :2].copy(),
+        targets_m=targets,
+        beats_s=np.zeros(0),
+        downbeats_s=np.zeros(0),
+        mode="feasible",
+        source="test",
+        seed=0,
+        version=quaddance.__version__,
     )
 
 
@@ -86,7 +101,9 @@ def reading_from_env(env, seq: int) -> Reading:
     """What the simulated robot's sensors read, as the robot runner receives it."""
     s = env.robot
     return Reading(
-        seq=seq, stamp_s=seq * 0.02, quat_wxyz=s.base_quat_w[0].numpy().astype(np.float64),
+        seq=seq,
+        stamp_s=seq * 0.02,
+        quat_wxyz=s.base_quat_w[0].numpy().astype(np.float64),
         gyro_rad_s=s.base_ang_vel_b[0].numpy().astype(np.float64),
         joint_pos_rad=(s.joint_pos + env.joint_offset)[0].numpy().astype(np.float64),
         joint_vel_rad_s=s.joint_vel[0].numpy().astype(np.float64),
@@ -135,7 +152,8 @@ def test_go1_lowcmd_and_lowstate_mapping(policy):
         assert m.mode == gb.SERVO_MODE
         np.testing.assert_allclose(
             [m.q, m.dq, m.Kp, m.Kd, m.tau],
-            [cmd.q_rad[j], cmd.dq_rad_s[j], cmd.kp[j], cmd.kd[j], cmd.tau_ff_nm[j]], atol=1e-6,
+            [cmd.q_rad[j], cmd.dq_rad_s[j], cmd.kp[j], cmd.kd[j], cmd.tau_ff_nm[j]],
+            atol=1e-6,
         )
     # PositionLimit (the SDK's guard) leaves an in-range command alone.
     q_nom = np.asarray(go1.nominal_joint_pos())
@@ -158,8 +176,14 @@ def test_go1_lowcmd_and_lowstate_mapping(policy):
     reading = gb.reading_from_low_state(state)
     assert reading.seq == 1234
     np.testing.assert_allclose(reading.foot_force_n, [20, 10, 40, 30])  # FL, FR, RL, RR
-    direct = Reading(seq=1, stamp_s=0.0, quat_wxyz=quat, gyro_rad_s=np.array([0.1, -0.2, 0.3]),
-                     joint_pos_rad=q, joint_vel_rad_s=dq)
+    direct = Reading(
+        seq=1,
+        stamp_s=0.0,
+        quat_wxyz=quat,
+        gyro_rad_s=np.array([0.1, -0.2, 0.3]),
+        joint_pos_rad=q,
+        joint_vel_rad_s=dq,
+    )
     targets = dance_targets(policy, 1.0)
     a, b = DanceController(policy, targets), DanceController(policy, targets)
     a.reset(reading)
@@ -182,7 +206,9 @@ def run_sim(policy, targets, tmp_path: Path, seconds: float, inject=()) -> tuple
     from quaddance.deploy.sim_backend import SimRobot
 
     runner = Runner(
-        SimRobot(), policy, targets,
+        SimRobot(),
+        policy,
+        targets,
         DeployOptions(seconds=seconds, auto_start=True, inject=list(inject)),
     )
     result = runner.run()
@@ -250,9 +276,7 @@ def test_sim_deploy_of_a_song_dances_through_lag_with_a_soft_start_in_torque_lim
     assert stand_s >= 2.0 - 0.03
 
 
-@pytest.mark.parametrize(
-    ("fault", "deadline_s"), [("push", 1.5), ("freeze", 0.1), ("nan", 0.06)]
-)
+@pytest.mark.parametrize(("fault", "deadline_s"), [("push", 1.5), ("freeze", 0.1), ("nan", 0.06)])
 def test_sim_fault_ends_in_damp_within_its_deadline(policy, tmp_path, fault, deadline_s):
     targets = dance_targets(policy, 3.0, seed=5)
     summary, log = run_sim(policy, targets, tmp_path, 3.0, inject=[(fault, 1.0)])
@@ -272,10 +296,26 @@ def test_ctrl_c_damps_writes_the_log_and_exits_0(policy, tmp_path):
     dance_path = tmp_path / "dance.npz"
     save_dance(dance_path, as_dance(dance_targets(policy, 20.0)))
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "quaddance.cli", "deploy", "--dance", str(dance_path),
-           "--robot", "sim", "--auto-start", "--out", str(out)]
-    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
-                            env={**os.environ, "COLUMNS": "200"})
+    cmd = [
+        sys.executable,
+        "-m",
+        "quaddance.cli",
+        "deploy",
+        "--dance",
+        str(dance_path),
+        "--robot",
+        "sim",
+        "--auto-start",
+        "--out",
+        str(out),
+    ]
+    proc = subprocess.Popen(
+        cmd,
+        stderr=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "COLUMNS": "200"},
+    )
     lines = []
     for line in proc.stderr:  # progress lines; the dance has begun at "dance: ..."
         lines.append(line)
@@ -304,8 +344,9 @@ def test_deploy_refuses_bad_input_in_one_line(tmp_path):
         (["--demo", "--robot", "go1", "--inject", "push@1"], "--robot sim only"),
         ([str(tmp_path / "missing.wav")], "missing.wav: no such file"),
     ]:
-        done = subprocess.run([*cli, *args, "--out", str(tmp_path / "o")], capture_output=True,
-                              text=True, timeout=60)
+        done = subprocess.run(
+            [*cli, *args, "--out", str(tmp_path / "o")], capture_output=True, text=True, timeout=60
+        )
         assert done.returncode == 2, done.stderr
         assert done.stderr.strip().count("\n") == 0 and needle in done.stderr, done.stderr
         assert not (tmp_path / "o" / "deploy.json").exists()

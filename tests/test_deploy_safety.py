@@ -25,15 +25,23 @@ NOMINAL = np.asarray(go1.nominal_joint_pos())
 
 def reading(seq: int, q=NOMINAL, dq=None, quat=(1.0, 0.0, 0.0, 0.0)) -> Reading:
     return Reading(
-        seq=seq, stamp_s=seq * 0.002, quat_wxyz=np.asarray(quat, dtype=float),
-        gyro_rad_s=np.zeros(3), joint_pos_rad=np.asarray(q, dtype=float),
+        seq=seq,
+        stamp_s=seq * 0.002,
+        quat_wxyz=np.asarray(quat, dtype=float),
+        gyro_rad_s=np.zeros(3),
+        joint_pos_rad=np.asarray(q, dtype=float),
         joint_vel_rad_s=np.zeros(12) if dq is None else np.asarray(dq, dtype=float),
     )
 
 
 def safety(**cfg) -> Safety:
-    return Safety(SafetyCfg(**cfg), kp=20.0, kd=0.5, nominal_rad=NOMINAL,
-                  joint_range_rad=go1_joint_range_rad())
+    return Safety(
+        SafetyCfg(**cfg),
+        kp=20.0,
+        kd=0.5,
+        nominal_rad=NOMINAL,
+        joint_range_rad=go1_joint_range_rad(),
+    )
 
 
 def test_guard_keeps_targets_in_range_step_and_torque_limits():
@@ -120,13 +128,18 @@ def test_late_inference_holds_the_last_command():
     from quaddance.pipeline import target_bank
 
     policy = OnnxPolicy.load(shipped_policy_path())
-    cfg = SafetyCfg(passive_s=0.1, stand_s=2.0, gain_ramp_s=1.0, ready_settle_s=0.1,
-                    done_stand_s=0.2, done_damp_s=0.1)
+    cfg = SafetyCfg(
+        passive_s=0.1,
+        stand_s=2.0,
+        gain_ramp_s=1.0,
+        ready_settle_s=0.1,
+        done_stand_s=0.2,
+        done_damp_s=0.1,
+    )
     slow = SlowEveryFifth(policy, late_s=cfg.inference_budget_s + 0.004)
     targets = target_bank(1, 2.0, seed=1)[0]
     robot = StandingRobot()
-    runner = Runner(robot, slow, targets, DeployOptions(seconds=1.0, auto_start=True,
-                                                        safety=cfg))
+    runner = Runner(robot, slow, targets, DeployOptions(seconds=1.0, auto_start=True, safety=cfg))
     result = runner.run()
     log, summary = result.log, result.summary
     assert summary["final_state"] == "done"
@@ -162,8 +175,12 @@ def test_sigterm_damps_and_ends_the_run():
 
     policy = OnnxPolicy.load(shipped_policy_path())
     cfg = SafetyCfg(passive_s=0.1, stand_s=2.0, gain_ramp_s=1.0, ready_settle_s=0.1)
-    runner = Runner(StandingRobot(), policy, target_bank(1, 10.0, seed=2)[0],
-                    DeployOptions(auto_start=True, safety=cfg))
+    runner = Runner(
+        StandingRobot(),
+        policy,
+        target_bank(1, 10.0, seed=2)[0],
+        DeployOptions(auto_start=True, safety=cfg),
+    )
     # SIGTERM 1 s into the dance (passive 0.1 + stand 2.0 + ready 0.1 s before it).
     timer = threading.Timer(3.2, os.kill, (os.getpid(), signal.SIGTERM))
     before = signal.getsignal(signal.SIGTERM)

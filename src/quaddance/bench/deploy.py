@@ -80,12 +80,28 @@ def _compare(policy, song: Path, seconds: float, log) -> tuple[dict, np.ndarray]
     }
     log(f"  deploy --robot sim, {n / policy.task.policy_hz:.0f} s in real time")
     dep = _deploy(policy, dance.targets_m[:n], n / policy.task.policy_hz)
-    deploy_res = {k: dep[k] for k in ("final_state", "duration_s", "falls", "front",
-                                      "rear_lift_mean_m", "tick_ms", "period_ms", "guards",
-                                      "overrun_ticks", "priority", "sim")}
+    deploy_res = {
+        k: dep[k]
+        for k in (
+            "final_state",
+            "duration_s",
+            "falls",
+            "front",
+            "rear_lift_mean_m",
+            "tick_ms",
+            "period_ms",
+            "guards",
+            "overrun_ticks",
+            "priority",
+            "sim",
+        )
+    }
     deploy_res["front_mae_mean_m"] = _mean_mae(dep["front"])
-    return {"seconds": n / policy.task.policy_hz, "dance": dance_res,
-            "deploy_sim": deploy_res}, dance.targets_m
+    return {
+        "seconds": n / policy.task.policy_hz,
+        "dance": dance_res,
+        "deploy_sim": deploy_res,
+    }, dance.targets_m
 
 
 def run(seconds: float = 20.0, log: Callable[[str], None] = print) -> dict:

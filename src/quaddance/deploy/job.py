@@ -105,7 +105,10 @@ def run_deploy(job: DeployJob, status: Callable[[str], None] = lambda m: None) -
 
             status("analysing the music and choreographing")
             dance, _ = make_dance(
-                song, job.motion, mode=job.mode, seed=job.seed,
+                song,
+                job.motion,
+                mode=job.mode,
+                seed=job.seed,
                 target_cfg=target_config_for(policy, job.mode),
             )
         if abs(dance.fps - policy.task.policy_hz) > 1e-6:

@@ -40,7 +40,6 @@ RUNNER_RT_PRIORITY = 10
 PROGRESS_S = 5.0  #: a progress line every this many dance seconds
 
 
-
 class DanceController:
     """One robot's policy step: reading -> observation -> action -> joint targets.
 
@@ -93,8 +92,10 @@ class DanceController:
     def measurement(reading: Reading) -> Measurement:
         t = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float32)[None]  # noqa: E731
         return Measurement.from_imu(
-            t(reading.quat_wxyz), t(reading.gyro_rad_s),
-            t(reading.joint_pos_rad), t(reading.joint_vel_rad_s),
+            t(reading.quat_wxyz),
+            t(reading.gyro_rad_s),
+            t(reading.joint_pos_rad),
+            t(reading.joint_vel_rad_s),
         )
 
     def reset(self, reading: Reading) -> None:
@@ -179,7 +180,9 @@ class _Audio:
     def start(self) -> None:
         if self._cmd is not None:
             self.proc = subprocess.Popen(
-                self._cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                self._cmd,
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.DEVNULL,
                 stderr=subprocess.DEVNULL,
             )
             self.status = "played"
@@ -376,8 +379,9 @@ class Runner:
         self.robot.close()
         if self.dance_start is not None and self.dance_end_s is None:
             self.dance_end_s = rows["t_s"][-1]
-        return self._result(rows, self.dance_start, t0, self.dance_end_s, self.injected,
-                            overruns, self.audio)
+        return self._result(
+            rows, self.dance_start, t0, self.dance_end_s, self.injected, overruns, self.audio
+        )
 
     def _done_standing_s(self) -> float:
         """How long `done` keeps the robot standing (settle + stand) before damping."""
@@ -409,7 +413,8 @@ class Runner:
                 _drain_stdin()  # an Enter typed before the prompt must not start the dance
             sf.go("ready", "standing", tick.now)
             self.status(
-                f"ready: dancing in {self.opt.safety.ready_settle_s:g} s" if self.opt.auto_start
+                f"ready: dancing in {self.opt.safety.ready_settle_s:g} s"
+                if self.opt.auto_start
                 else "ready: press Enter to dance (Ctrl-C stops)"
             )
 
@@ -547,8 +552,11 @@ class Runner:
             fallen &= (truth["mono_s"] >= start) & (truth["mono_s"] < end)
             falls = int(np.count_nonzero(np.diff(fallen.astype(int), prepend=0) == 1))
         else:
-            falls = sum(1 for e in self.safety.events if e.to == "damp" and (
-                "roll" in e.reason or "collapsing" in e.reason))
+            falls = sum(
+                1
+                for e in self.safety.events
+                if e.to == "damp" and ("roll" in e.reason or "collapsing" in e.reason)
+            )
         front, rear = None, None
         if dancing.sum() >= 2:
             tgt, fm = log["targets_m"][dancing], feet[dancing]
@@ -584,23 +592,63 @@ class Runner:
 
 
 _LOG_KEYS = (
-    "t_s", "wall_s", "seq", "new_state", "age_s", "state", "q", "dq", "q_target", "kp", "kd",
-    "tau_est_nm", "gyro", "gravity", "foot_force", "feet_est_m", "action", "targets_m", "held",
-    "inference_ms", "tick_ms",
+    "t_s",
+    "wall_s",
+    "seq",
+    "new_state",
+    "age_s",
+    "state",
+    "q",
+    "dq",
+    "q_target",
+    "kp",
+    "kd",
+    "tau_est_nm",
+    "gyro",
+    "gravity",
+    "foot_force",
+    "feet_est_m",
+    "action",
+    "targets_m",
+    "held",
+    "inference_ms",
+    "tick_ms",
 )
 
 
-def _append(rows, tick: _Tick, wall_s: float, new: bool, state: str, gravity,
-            cmd: JointCommand, work_ms: float) -> None:
+def _append(
+    rows,
+    tick: _Tick,
+    wall_s: float,
+    new: bool,
+    state: str,
+    gravity,
+    cmd: JointCommand,
+    work_ms: float,
+) -> None:
     r = tick.reading
     vals = {
-        "t_s": tick.t_dance, "wall_s": wall_s, "seq": r.seq, "new_state": new, "age_s": r.age_s,
-        "state": STATES.index(state), "q": r.joint_pos_rad, "dq": r.joint_vel_rad_s,
-        "q_target": cmd.q_rad, "kp": cmd.kp[0], "kd": cmd.kd[0], "tau_est_nm": tick.tau_est,
-        "gyro": r.gyro_rad_s, "gravity": gravity, "foot_force": r.foot_force_n,
+        "t_s": tick.t_dance,
+        "wall_s": wall_s,
+        "seq": r.seq,
+        "new_state": new,
+        "age_s": r.age_s,
+        "state": STATES.index(state),
+        "q": r.joint_pos_rad,
+        "dq": r.joint_vel_rad_s,
+        "q_target": cmd.q_rad,
+        "kp": cmd.kp[0],
+        "kd": cmd.kd[0],
+        "tau_est_nm": tick.tau_est,
+        "gyro": r.gyro_rad_s,
+        "gravity": gravity,
+        "foot_force": r.foot_force_n,
         "feet_est_m": tick.feet,
-        "action": tick.action, "targets_m": tick.targets, "held": tick.held,
-        "inference_ms": tick.infer_s * 1e3, "tick_ms": work_ms,
+        "action": tick.action,
+        "targets_m": tick.targets,
+        "held": tick.held,
+        "inference_ms": tick.infer_s * 1e3,
+        "tick_ms": work_ms,
     }
     for k, v in vals.items():
         rows[k].append(np.array(v, copy=True))
@@ -611,8 +659,11 @@ def _pcts(values: np.ndarray) -> dict:
     v = v[np.isfinite(v)]
     if not v.size:
         return {"p50": None, "p99": None, "max": None}
-    return {"p50": round(float(np.percentile(v, 50)), 3),
-            "p99": round(float(np.percentile(v, 99)), 3), "max": round(float(v.max()), 3)}
+    return {
+        "p50": round(float(np.percentile(v, 50)), 3),
+        "p99": round(float(np.percentile(v, 99)), 3),
+        "max": round(float(v.max()), 3),
+    }
 
 
 def write_outputs(out_dir: Path, result: DeployResult) -> dict[str, Path]:

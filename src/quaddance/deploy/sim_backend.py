@@ -132,18 +132,27 @@ class _SimProcess:
         self.foot_of_geom = {g: i for i, g in enumerate(self.foot_geoms)}
         self.foot_sites = [self.model.site(f).id for f in go1.FEET]
         n = go1.NUM_JOINTS
-        self.noise_std = np.concatenate([
-            np.full(n, cfg.encoder_noise_rad), np.full(n, cfg.joint_vel_noise_rad_s),
-            np.full(3, cfg.gyro_noise_rad_s), np.full(3, cfg.imu_tilt_noise_rad),
-        ])
+        self.noise_std = np.concatenate(
+            [
+                np.full(n, cfg.encoder_noise_rad),
+                np.full(n, cfg.joint_vel_noise_rad_s),
+                np.full(3, cfg.gyro_noise_rad_s),
+                np.full(3, cfg.imu_tilt_noise_rad),
+            ]
+        )
         self._noise_quat = np.zeros(4)
         self._force = np.zeros(6)
         cap = 4096
         self.truth: dict[str, np.ndarray] = {
-            "seq": np.zeros(cap, np.int64), "time_s": np.zeros(cap), "mono_s": np.zeros(cap),
-            "late_s": np.zeros(cap), "feet_m": np.zeros((cap, 4)),
-            "base_height_m": np.zeros(cap), "tilt_rad": np.zeros(cap),
-            "trunk_contact": np.zeros(cap, bool), "tau_nm": np.zeros((cap, n)),
+            "seq": np.zeros(cap, np.int64),
+            "time_s": np.zeros(cap),
+            "mono_s": np.zeros(cap),
+            "late_s": np.zeros(cap),
+            "feet_m": np.zeros((cap, 4)),
+            "base_height_m": np.zeros(cap),
+            "tilt_rad": np.zeros(cap),
+            "trunk_contact": np.zeros(cap, bool),
+            "tau_nm": np.zeros((cap, n)),
         }
         self.n_truth = 0
 
@@ -339,9 +348,20 @@ class SimRobot(Robot):
         port = self._sock.getsockname()[1]
         with open(self._stderr_path, "wb") as err:
             self._proc = subprocess.Popen(
-                [sys.executable, "-m", "quaddance.deploy.sim_backend", "--runner-port", str(port),
-                 "--truth", str(self._truth_path), "--config", self.cfg.to_json()],
-                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=err,
+                [
+                    sys.executable,
+                    "-m",
+                    "quaddance.deploy.sim_backend",
+                    "--runner-port",
+                    str(port),
+                    "--truth",
+                    str(self._truth_path),
+                    "--config",
+                    self.cfg.to_json(),
+                ],
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.DEVNULL,
+                stderr=err,
             )
         end = time.monotonic() + timeout_s
         while time.monotonic() < end:
@@ -369,8 +389,13 @@ class SimRobot(Robot):
             if self._latest is not None and v[1] <= self._latest.seq:
                 continue
             self._latest = Reading(
-                seq=v[1], stamp_s=v[2], quat_wxyz=f[0:4], gyro_rad_s=f[4:7],
-                joint_pos_rad=f[7:19], joint_vel_rad_s=f[19:31], foot_force_n=f[31:35],
+                seq=v[1],
+                stamp_s=v[2],
+                quat_wxyz=f[0:4],
+                gyro_rad_s=f[4:7],
+                joint_pos_rad=f[7:19],
+                joint_vel_rad_s=f[19:31],
+                foot_force_n=f[31:35],
                 age_s=time.monotonic() - v[3],
             )
         return self._latest
