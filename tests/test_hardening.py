@@ -328,6 +328,7 @@ def test_interrupted_dance_leaves_complete_outputs(tmp_path, demo_song) -> None:
         (["bench", "reach", "--tolerance", "0"], "--tolerance"),
         (["bench", "choreograph", "--repeats", "0"], "--repeats"),
         (["bench", "train", "--num-envs", "-4"], "--num-envs"),
+        (["deploy", "--seconds", "nan"], "--seconds"),
     ],
 )
 def test_out_of_range_options_are_usage_errors(args, option) -> None:
