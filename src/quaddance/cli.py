@@ -408,6 +408,13 @@ def deploy_cmd(
     power_level: Annotated[
         int, typer.Option(help="go1: SDK PowerProtect level, 1 (10 %) to 10.", min=1, max=10)
     ] = 1,
+    sim_latency_ms: Annotated[
+        tuple[float, float],
+        typer.Option(
+            help="sim: sensor-to-motor delay range, ms (drawn per message).",
+            callback=finite_in(0.0, 500.0),
+        ),
+    ] = (5.0, 20.0),
 ) -> None:
     """Run the dance on a robot: passive -> soft stand -> ready -> dance -> done, with a safety
     layer (damping on a fall, a stale or NaN state, Ctrl-C); writes deploy.json and log.npz."""
@@ -419,7 +426,7 @@ def deploy_cmd(
     job = DeployJob(
         out_dir=out, robot=robot, song=song, motion=motion, dance=dance, demo=demo,
         policy=policy, seconds=seconds, auto_start=auto_start, inject=parse_inject(inject),
-        robot_ip=robot_ip, power_level=power_level,
+        robot_ip=robot_ip, power_level=power_level, sim_latency_ms=sim_latency_ms,
     )
     summary, paths = run_deploy(job, status=lambda msg: console.log(msg))
     front = summary["front"] or {}

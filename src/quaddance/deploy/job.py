@@ -51,13 +51,14 @@ class DeployJob:
     seed: int = 0
     robot_ip: str = "192.168.123.10"
     power_level: int = 1
+    sim_latency_ms: tuple[float, float] = (5.0, 20.0)
 
 
 def make_robot(job: DeployJob):
     if job.robot == "sim":
-        from quaddance.deploy.sim_backend import SimRobot
+        from quaddance.deploy.sim_backend import SimRobot, SimRobotCfg
 
-        return SimRobot()
+        return SimRobot(SimRobotCfg(latency_ms=tuple(job.sim_latency_ms)))
     if job.robot == "go1":
         from quaddance.deploy.go1_backend import Go1Robot, load_sdk
 
@@ -79,6 +80,9 @@ def run_deploy(job: DeployJob, status: Callable[[str], None] = lambda m: None) -
         raise QuaddanceError("give one of SONG, --demo, --dance FILE or --motion FILE")
     if job.robot not in ROBOTS:
         raise QuaddanceError(f"--robot must be one of {', '.join(ROBOTS)}, got {job.robot!r}")
+    lo, hi = job.sim_latency_ms
+    if not 0 <= lo <= hi:
+        raise QuaddanceError(f"--sim-latency-ms needs 0 <= LO <= HI, got {lo:g} {hi:g}")
     if job.inject and job.robot != "sim":
         raise QuaddanceError("--inject works with --robot sim only (never on a real robot)")
     if job.seconds is not None and not (math.isfinite(job.seconds) and job.seconds > 0):
