@@ -334,6 +334,38 @@ def test_frames_from_several_workers_come_in_order(tmp_path: Path, scene_model) 
     assert np.abs(frames[1][0] - frames[1][15]).mean() > 0.5
 
 
+def test_video_streamed_during_the_simulation_equals_the_one_made_afterwards(
+    tmp_path: Path, scene_model
+) -> None:
+    """Poses added one by one (frames handed out before the camera path is complete) make
+    the same video as the whole trajectory at once."""
+    import imageio_ffmpeg
+
+    from quaddance.play import video
+
+    qpos = _dancing_qpos(scene_model, 2.0)
+    qpos[:, 0] += 0.4 * np.arange(len(qpos)) / SIM_FPS  # the base walks: the camera follows
+    targets = np.zeros((len(qpos), 4))
+    targets[:, 1] = np.linspace(0.0, 0.2, len(qpos))
+    outs = [tmp_path / "batch.mp4", tmp_path / "streamed.mp4"]
+    with video.VideoRenderer(None, 160, 120) as renderer:  # the model built in the workers
+        renderer.render(qpos, SIM_FPS, outs[0], target_heights_m=targets, progress=False)
+    # Given the model, the renderer knows its layout at once and hands frames out early.
+    with video.VideoRenderer(scene_model, 160, 120) as renderer:
+        stream = renderer.stream(len(qpos), SIM_FPS, outs[1], target_markers=True, progress=False)
+        for q, t in zip(qpos, targets, strict=True):
+            stream.add(q, t)
+        timing = stream.finish().wait()
+    assert timing["frames"] == 60
+    frames = []
+    for out in outs:
+        reader = imageio_ffmpeg.read_frames(str(out))
+        next(reader)
+        frames.append(np.stack([np.frombuffer(f, np.uint8).astype(int) for f in reader]))
+    assert frames[0].shape == frames[1].shape == (60, 160 * 120 * 3)
+    assert np.abs(frames[0] - frames[1]).max() <= 2
+
+
 def test_failed_video_leaves_the_previous_one(tmp_path: Path, scene_model) -> None:
     from quaddance.play import video
 

@@ -116,7 +116,25 @@ def _run_dance(
     paths = {"dance": out / "dance.npz"}
     save_dance(paths["dance"], dance)
 
-    status("dancing (simulation)")
+    stream, on_pose = None, None
+    if renderer is not None:
+        # The video is filmed while the dance is simulated: each pose goes to the renderer.
+        status("dancing and filming")
+        paths["video"] = out / "dance.mp4"
+        stream = renderer.stream(
+            dance.targets_m.shape[0],
+            dance.fps,
+            paths["video"],
+            audio_path=job.song,
+            target_markers=job.target_markers,
+            progress=show_render_progress,
+        )
+
+        def on_pose(step: int, qpos: Any, targets_m: Any) -> None:
+            stream.add(qpos, targets_m if job.target_markers else None)
+
+    else:
+        status("dancing (simulation)")
     sim_seed = job.seed if job.sim_seed is None else job.sim_seed
     result = rollout(
         dance,
@@ -126,21 +144,10 @@ def _run_dance(
         progress=sim_progress,
         policy_output=job.policy_output,
         pinned=job.pinned,
+        on_pose=on_pose,
     )
     timings["simulation_s"] = result.sim_wall_s
-
-    render = None
-    if renderer is not None:
-        status("filming")
-        paths["video"] = out / "dance.mp4"
-        render = renderer.start(
-            result.qpos,
-            result.fps,
-            paths["video"],
-            audio_path=job.song,
-            target_heights_m=result.targets_m if job.target_markers else None,
-            progress=show_render_progress,
-        )
+    render = stream.finish() if stream is not None else None
 
     t0 = time.perf_counter()
     title = f"{Path(dance.source).name} - {policy_path.name}"
@@ -153,10 +160,11 @@ def _run_dance(
         video = render.wait()
         render_s = video["total_s"]
         timings["render_s"] = render_s
-        # Start-up of the render workers, from their spawn at the start; the wait for them
-        # after the simulation (0 when the start-up was fully hidden).
+        # The part after the simulation; the render workers' start-up, from their spawn at
+        # the start, and its CPU seconds.
+        timings["render_after_sim_s"] = video["tail_s"]
         timings["render_workers_ready_s"] = video["workers_ready_s"]
-        timings["render_startup_wait_s"] = video["startup_wait_s"]
+        timings["render_worker_startup_cpu_s"] = video["worker_startup_cpu_s"]
     metrics = dance_metrics(
         result.time_s,
         result.targets_m,

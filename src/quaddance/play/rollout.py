@@ -154,6 +154,7 @@ def rollout(
     progress: Callable[[int, int], None] | None = None,
     policy_output: PolicyOutput = "policy",
     pinned: PinnedDynamics | None = None,
+    on_pose: Callable[[int, np.ndarray, np.ndarray], None] | None = None,
 ) -> RolloutResult:
     """Play the whole dance; after a fall the robot is stood up again and the dance goes on.
 
@@ -162,6 +163,8 @@ def rollout(
             offsets, action lag, pushes), from ``seed``.
         policy_output: "policy", or "zero" for the feed-forward alone (the policy is not run).
         pinned: fixed dynamics and scheduled pushes instead (not with ``randomize``).
+        on_pose: called with (step, qpos (nq,), targets (4,)) as each step is recorded, so
+            that the video can be rendered while the dance is still being simulated.
     """
     if policy_output not in POLICY_OUTPUTS:
         raise QuaddanceError(
@@ -174,7 +177,7 @@ def rollout(
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
-        return _play(env, policy, n_steps, progress, policy_output == "zero", pushes)
+        return _play(env, policy, n_steps, progress, policy_output == "zero", pushes, on_pose)
     finally:
         torch.set_num_threads(threads)
 
@@ -186,6 +189,7 @@ def _play(
     progress,
     zero_output: bool = False,
     pushes: dict[int, tuple[float, float]] | None = None,
+    on_pose: Callable[[int, np.ndarray, np.ndarray], None] | None = None,
 ) -> RolloutResult:
     cfg = env.cfg
     pushes = pushes or {}
@@ -202,6 +206,8 @@ def _play(
         qpos[t] = env.engine.read().qpos[0].numpy()
         feet[t] = env.robot.foot_height_m[0].numpy()
         targets[t] = env.targets_at(0)[0].numpy()
+        if on_pose is not None:
+            on_pose(t, qpos[t], targets[t])
         if t in pushes:
             env.push_base(env0, torch.tensor([pushes[t]], dtype=torch.float32))
             pushed_s.append(t / cfg.policy_hz)

@@ -91,6 +91,9 @@ class RenderCfg:
     #: software renderer that shares the cores.
     crf: int = 20
     preset: str = "veryfast"
+    #: x264 threads: 1 took 4.3 s CPU for 900 frames, x264's own choice 4.8 s, same file
+    #: size (measured); the render workers keep the cores busy anyway.
+    encoder_threads: int = 1
     audio_bitrate: str = "160k"
 
 
@@ -330,6 +333,10 @@ class _WorkerSpec:
 #: the workers' uneven speed without holding the song in memory.
 _FRAMES_AHEAD = 8
 
+#: Sim steps between hand-outs of frames while poses stream in (0.5 s at 50 Hz): each
+#: hand-out recomputes the camera path of the frames so far, so not every step.
+_STREAM_EVERY = 25
+
 
 def _parent_alive() -> bool:
     parent = mp.parent_process()
@@ -347,13 +354,24 @@ def _put(out: Any, item: tuple[str, Any]) -> None:
                 raise SystemExit(1) from None
 
 
+def _next_job(jobs: Any) -> Any:
+    """The next message from the caller; None when told to stop or when the caller died."""
+    while True:
+        try:
+            return jobs.get(timeout=1.0)
+        except queue_module.Empty:
+            if not _parent_alive():
+                return None
+
+
 def _worker(spec: _WorkerSpec, jobs: Any, out: Any) -> None:
     """Entry point of a rendering process.
 
     Start-up (model, EGL context, a warm-up frame: llvmpipe compiles its shaders on the
-    first draw) happens at once, then the worker reports the model's `QposLayout` and waits
-    for its job: a .npz of all frames, of which it draws every ``n_workers``-th from frame
-    ``worker`` on, in order, putting each image on ``out`` (or writing PNGs).
+    first draw) happens at once; then the worker reports the model's `QposLayout` and draws
+    what it is sent: chunks of frames ("frames", first index, qpos, lookat, targets or None)
+    of which it takes every ``n_workers``-th frame from frame ``worker`` on, putting each
+    image on ``out`` in order, until "end"; or ("stills", arrays, png paths).
     """
     try:
         if spec.model_path is not None:
@@ -365,26 +383,26 @@ def _worker(spec: _WorkerSpec, jobs: Any, out: Any) -> None:
         frames.render(model.qpos0)
         # Wall-clock time (comparable across processes) and this process's CPU so far.
         _put(out, ("ready", (layout, time.time(), time.process_time())))
-        while not jobs.poll(1.0):
-            if not _parent_alive():
-                return
-        job = jobs.recv()
-        if job is None:
-            return
-        frames_path, pngs = job
-        start = time.perf_counter()
-        mine = slice(spec.worker, None, spec.n_workers)
-        with np.load(frames_path) as arrays:
-            qpos, lookat = arrays["qpos"][mine], arrays["lookat"][mine]
-            targets = arrays["targets"][mine] if "targets" in arrays else None
-        for k in range(len(qpos)):
-            image = frames.render(qpos[k], lookat[k], None if targets is None else targets[k])
-            if pngs is not None:
-                _write_png(pngs[spec.worker + k * spec.n_workers], image)
-                _put(out, ("frame", None))
-            else:
+        start = None
+        while (job := _next_job(jobs)) is not None:
+            start = start or time.perf_counter()
+            if job[0] == "end":
+                break
+            if job[0] == "stills":
+                _, arrays, pngs = job
+                targets = arrays.get("targets")
+                for k in range(spec.worker, len(pngs), spec.n_workers):
+                    tk = None if targets is None else targets[k]
+                    _write_png(pngs[k], frames.render(arrays["qpos"][k], arrays["lookat"][k], tk))
+                    _put(out, ("frame", None))
+                break
+            _, first, qpos, lookat, targets = job
+            for i in range((spec.worker - first) % spec.n_workers, len(qpos), spec.n_workers):
+                image = frames.render(qpos[i], lookat[i], None if targets is None else targets[i])
                 _put(out, ("frame", np.ascontiguousarray(image)))
-        _put(out, ("done", time.perf_counter() - start))
+        else:
+            return  # told to stop (or the caller died) before the end
+        _put(out, ("done", time.perf_counter() - (start or time.perf_counter())))
     except (EOFError, SystemExit):
         return  # the caller went away
     except BaseException:
@@ -402,11 +420,12 @@ class VideoRenderer:
     """Rendering processes started ahead of the poses they will draw.
 
     Creating one spawns the workers at once; each builds (or loads) the model, makes its EGL
-    context and draws a warm-up frame while the caller goes on analysing the music and
-    simulating, so that start-up is off the critical path. `render` (or `start` + `wait`)
-    then hands all frames out, round robin, and pipes the images in order to one ffmpeg that
-    encodes H.264 and muxes the song as AAC in the same pass. One video per instance; use it
-    as a context manager (or call `close`) so the workers always end.
+    context and draws a warm-up frame while the caller goes on analysing the music. Then
+    `stream` opens the video: poses can be added while the dance is still being simulated
+    (`VideoStream.add`), and frames are handed out round robin as soon as their camera
+    position is known; one ffmpeg encodes them in order (H.264) and muxes the song (AAC) in
+    the same pass. `render` (all poses at once) and `start` are shorthands. One video per
+    instance; use it as a context manager (or call `close`) so the workers always end.
     """
 
     def __init__(
@@ -436,10 +455,12 @@ class VideoRenderer:
         self._tmp = tempfile.TemporaryDirectory(prefix="quaddance-video-")
         self._tmp_dir = Path(self._tmp.name)
         self._layout: QposLayout | None = None
+        self._layout_known = threading.Event()
         model_path = None
         if model is not None:
             base = _load_model(model)
             self._layout = QposLayout.of(base)
+            self._layout_known.set()
             model_path = self._tmp_dir / "model.mjb"
             mujoco.mj_saveModel(base, str(model_path), None)
         self._cpu_before = _children_cpu_s()
@@ -456,12 +477,12 @@ class VideoRenderer:
         try:
             for i in range(workers):
                 spec = _WorkerSpec(i, workers, model_path, width, height, self.cfg)
-                receive, send = ctx.Pipe(duplex=False)
+                # Unbounded: handing out frames must never hold up the simulation.
+                jobs = ctx.Queue()
                 out = ctx.Queue(maxsize=_FRAMES_AHEAD)
-                proc = ctx.Process(target=_worker, args=(spec, receive, out), daemon=True)
+                proc = ctx.Process(target=_worker, args=(spec, jobs, out), daemon=True)
                 proc.start()
-                receive.close()  # the worker has its own copy
-                self._jobs.append(send)
+                self._jobs.append(jobs)
                 self._outs.append(out)
                 self._procs.append(proc)
         except BaseException:
@@ -483,10 +504,10 @@ class VideoRenderer:
         task_running = self._task is not None and self._task.running()
         if task_running and self._encoder is not None and self._encoder.poll() is None:
             self._encoder.kill()
-        for send, proc in zip(self._jobs, self._procs, strict=False):
+        for jobs, proc in zip(self._jobs, self._procs, strict=False):
             if proc.is_alive():
-                with contextlib.suppress(OSError):  # it died meanwhile
-                    send.send(None)
+                with contextlib.suppress(OSError, ValueError):  # it died meanwhile
+                    jobs.put(None)
         for proc in self._procs:
             # A worker with no job (an error before rendering) need not finish starting up.
             proc.join(timeout=2.0 if self._used and not task_running else 0.1)
@@ -495,15 +516,13 @@ class VideoRenderer:
                 proc.join(timeout=5.0)
         if self._task is not None:
             self._task.join(timeout=10.0)
-        for conn in self._jobs:
-            conn.close()
-        for out in self._outs:
-            out.cancel_join_thread()  # frames nobody will read must not block our exit
-            out.close()
+        for q in self._jobs + self._outs:
+            q.cancel_join_thread()  # messages nobody will read must not block our exit
+            q.close()
         self._jobs, self._outs, self._procs = [], [], []
         self._tmp.cleanup()
 
-    # -- messages from the workers
+    # -- messages from the workers (read only by the thread that encodes)
 
     def _receive(self, worker: int) -> tuple[str, Any]:
         """The next message of one worker; raises RenderError if it failed or died."""
@@ -537,30 +556,56 @@ class VideoRenderer:
             kind, (layout, ready_at, cpu_s) = self._receive(worker)
             assert kind == "ready", kind
             self._ready[worker] = True
-            self._layout = self._layout or layout
+            if self._layout is None:
+                self._layout = layout
+                self._layout_known.set()
             self._ready_at.append(ready_at)
             self._startup_cpu_s.append(cpu_s)
 
-    def layout(self) -> QposLayout:
-        """The model's qpos layout (waits for the first worker if the model is built there)."""
-        if self._layout is None:
-            self._wait_ready(0)
-        assert self._layout is not None
-        return self._layout
-
-    def _hand_out(self, arrays: dict[str, np.ndarray], pngs: list[Path] | None) -> None:
-        """Give every worker the job; each draws its share of ``arrays`` (frames on axis 0)."""
+    def _claim(self) -> None:
         if self._used:
             raise QuaddanceError("a VideoRenderer renders one video; make a new one")
         self._used = True
-        for i in range(self.n_workers):
-            self._wait_ready(i)
-        frames_path = self._tmp_dir / "frames.npz"
-        np.savez(frames_path, **arrays)
-        for send in self._jobs:
-            send.send((frames_path, pngs))
+
+    def _send(self, job: tuple[Any, ...]) -> None:
+        for jobs in self._jobs:
+            jobs.put(job)
 
     # -- the video
+
+    def stream(
+        self,
+        n_poses: int,
+        sim_fps: float,
+        out_path: str | Path,
+        audio_path: str | Path | None = None,
+        audio_offset_s: float = 0.0,
+        fps: float = 30.0,
+        target_markers: bool = False,
+        progress: bool = True,
+    ) -> VideoStream:
+        """Open the video of ``n_poses`` poses at ``sim_fps`` that will be added one by one
+        (`VideoStream.add`); the encoder starts now. Arguments as in `render_video`;
+        ``target_markers``: `add` will pass each step's targets."""
+        _check_size(self.width, self.height, fps)
+        if audio_offset_s < 0 or not np.isfinite(audio_offset_s):
+            raise QuaddanceError(f"audio_offset_s must be >= 0, got {audio_offset_s}")
+        if not sim_fps > 0:
+            raise QuaddanceError(f"sim_fps must be > 0, got {sim_fps}")
+        if n_poses < 1:
+            raise QuaddanceError(f"a video needs at least one pose, got {n_poses}")
+        audio = Path(audio_path) if audio_path is not None else None
+        if audio is not None:
+            _check_audio(audio)
+        self._claim()
+        n_frames = max(1, round(n_poses / sim_fps * fps))
+        args = _encoder_args(
+            self.width, self.height, fps, n_frames, audio, audio_offset_s, self.cfg
+        )
+        task = RenderTask(self, args, Path(out_path), n_frames, fps, progress)
+        self._task = task
+        task.begin()
+        return VideoStream(self, task, n_poses, sim_fps, fps, target_markers)
 
     def render(
         self,
@@ -589,43 +634,24 @@ class VideoRenderer:
         target_heights_m: np.ndarray | None = None,
         progress: bool = True,
     ) -> RenderTask:
-        """Start rendering in a background thread, so the caller can do other work (plot,
-        metrics) meanwhile; `RenderTask.wait` returns the timing or raises. Arguments are
-        checked here, before anything is rendered."""
-        total_start = time.perf_counter()
-        _check_size(self.width, self.height, fps)
-        if audio_offset_s < 0 or not np.isfinite(audio_offset_s):
-            raise QuaddanceError(f"audio_offset_s must be >= 0, got {audio_offset_s}")
-        audio = Path(audio_path) if audio_path is not None else None
-        if audio is not None:
-            _check_audio(audio)
-        layout = self.layout()
-        qpos = _check_poses(layout.nq, qpos_s, sim_fps, target_heights_m)
-        duration_s = qpos.shape[0] / sim_fps
-        n_frames = max(1, round(duration_s * fps))
-        times_s = np.arange(n_frames) / fps
-        frames_qpos = resample_qpos(layout, qpos, sim_fps, times_s)
-        arrays = {"qpos": frames_qpos, "lookat": follow_lookat(layout, frames_qpos, fps, self.cfg)}
-        if target_heights_m is not None:
-            src = np.asarray(target_heights_m, dtype=float)
-            # Step-hold, not interpolation: a marker shows the target of the sim step on screen.
-            arrays["targets"] = src[
-                np.minimum((times_s * sim_fps + 1e-9).astype(int), len(src) - 1)
-            ]
-        args = _encoder_args(
-            self.width, self.height, fps, n_frames, audio, audio_offset_s, self.cfg
-        )
-        task = RenderTask(self, arrays, args, Path(out_path), audio, n_frames, fps, progress)
-        task.total_start = total_start
-        self._task = task
-        task.begin()
-        return task
+        """Start rendering all poses at once in a background thread; `RenderTask.wait`
+        returns the timing or raises. Arguments are checked here, before anything starts."""
+        qpos = np.asarray(qpos_s, dtype=float)
+        nq = self._layout.nq if self._layout is not None else qpos.shape[-1]
+        qpos = _check_poses(nq, qpos, sim_fps, target_heights_m)
+        stream = self.stream(
+            len(qpos), sim_fps, out_path, audio_path, audio_offset_s, fps,
+            target_heights_m is not None, progress,
+        )  # fmt: skip
+        stream.add(qpos, target_heights_m)
+        return stream.finish()
 
     def _encode(self, task: RenderTask) -> dict[str, Any]:
-        """Hand the frames out and pipe them, in order, into ffmpeg (runs in the task thread)."""
+        """Pipe the workers' frames, in order, into ffmpeg (runs in the task thread)."""
         wait_start = time.perf_counter()
-        self._hand_out(task.arrays, None)
-        render_start = time.perf_counter()
+        for i in range(self.n_workers):
+            self._wait_ready(i)
+        ready = time.perf_counter()
         bar = _Progress(task.progress, "Rendering video", task.n_frames)
         try:
             with atomic_path(task.out_path) as tmp_out:
@@ -675,10 +701,11 @@ class VideoRenderer:
             "height": self.height,
             "workers": min(self.n_workers, task.n_frames),
             "duration_s": video_s,
-            "startup_wait_s": render_start - wait_start,
+            "startup_wait_s": ready - wait_start,
             "workers_ready_s": max(self._ready_at) - self._created,
             "worker_startup_cpu_s": sum(self._startup_cpu_s),
-            "render_s": encode_end - render_start,
+            "render_s": encode_end - ready,
+            "tail_s": encode_end - (task.poses_done or encode_end),
             "worker_cpu_s": _children_cpu_s() - self._cpu_before,
             "mux_s": encode_end - frames_done,
             "total_s": total_s,
@@ -688,31 +715,130 @@ class VideoRenderer:
 
     def stills(self, arrays: dict[str, np.ndarray], pngs: list[Path]) -> None:
         """Draw the frames in ``arrays`` as PNGs at ``pngs`` (one each) and wait for them."""
-        self._hand_out(arrays, pngs)
+        self._claim()
+        self._send(("stills", arrays, pngs))
+        for i in range(self.n_workers):
+            self._wait_ready(i)
         for k in range(len(pngs)):
             self._receive(k % self.n_workers)
         for i in range(self.n_workers):
             self._receive(i)
 
 
-class RenderTask:
-    """A video being rendered by a `VideoRenderer` in a background thread."""
+class VideoStream:
+    """Poses going into a video while the simulation makes them (see `VideoRenderer.stream`).
+
+    Frame k shows sim time k / fps: it is drawn once the poses around that time and those
+    the camera smoothing looks ahead to are in, so the frames are exactly those of a video
+    rendered from the whole trajectory at once.
+    """
 
     def __init__(
         self,
         renderer: VideoRenderer,
-        arrays: dict[str, np.ndarray],
+        task: RenderTask,
+        n_poses: int,
+        sim_fps: float,
+        fps: float,
+        target_markers: bool,
+    ) -> None:
+        self._renderer, self._task = renderer, task
+        self.n_poses, self.sim_fps, self.fps = n_poses, sim_fps, fps
+        self._qpos: np.ndarray | None = None  # (n_poses, nq), allocated with the first pose
+        self._targets = np.zeros((n_poses, 4)) if target_markers else None
+        self._count = 0  # poses added
+        self._sent = 0  # frames handed out
+        self._times_s = np.arange(task.n_frames) / fps
+        # Frame k interpolates poses i0 and i1 = i0 + 1 (clipped), as resample_qpos does.
+        pos = np.clip(self._times_s * sim_fps, 0.0, n_poses - 1)
+        self._needs = np.minimum(np.floor(pos).astype(int) + 1, n_poses - 1)
+        # Frames the camera smoothing reaches ahead (gaussian_smooth: 4 sigma), plus one.
+        self._ahead = int(np.ceil(4.0 * renderer.cfg.smooth_s * fps)) + 1
+
+    def add(self, qpos: np.ndarray, target_heights_m: np.ndarray | None = None) -> None:
+        """Append poses (nq,) or (m, nq) and, with target markers, their targets (4,) or
+        (m, 4); frames whose poses are all in go out to the workers every few steps."""
+        rows = np.atleast_2d(np.asarray(qpos, dtype=float))
+        n = len(rows)
+        if self._count + n > self.n_poses:
+            raise QuaddanceError(f"more poses than the {self.n_poses} announced")
+        if self._qpos is None:
+            self._qpos = np.zeros((self.n_poses, rows.shape[1]))
+        self._qpos[self._count : self._count + n] = rows
+        if self._targets is not None:
+            if target_heights_m is None:
+                raise QuaddanceError("this video shows target markers: pass the targets")
+            self._targets[self._count : self._count + n] = np.atleast_2d(target_heights_m)
+        before, self._count = self._count, self._count + n
+        if self._count // _STREAM_EVERY > before // _STREAM_EVERY:
+            self._hand_out(final=False)
+
+    def finish(self) -> RenderTask:
+        """All poses are in: hand out the remaining frames; returns the task to wait on."""
+        if self._count != self.n_poses:
+            raise QuaddanceError(f"{self._count} poses added, {self.n_poses} announced")
+        self._task.poses_done = time.perf_counter()
+        self._hand_out(final=True)
+        return self._task
+
+    def _hand_out(self, final: bool) -> None:
+        renderer, task = self._renderer, self._task
+        if not renderer._layout_known.is_set():
+            if not final:
+                return  # the first worker is still starting: hand out later, don't wait
+            while not renderer._layout_known.wait(0.2):
+                if not task.running():
+                    return  # the task failed; wait() raises its error
+        layout = renderer._layout
+        assert layout is not None and self._qpos is not None
+        if self._qpos.shape[1] != layout.nq:
+            raise QuaddanceError(f"qpos must have {layout.nq} columns, got {self._qpos.shape[1]}")
+        if not np.all(np.isfinite(self._qpos[: self._count])):
+            raise QuaddanceError("qpos_s contains NaN or inf")
+        known = int(np.searchsorted(self._needs, self._count - 1, side="right"))
+        if not final:
+            known -= self._ahead  # their camera position still depends on poses to come
+        if known > self._sent:
+            self._send_frames(known)
+        if final:
+            renderer._send(("end",))
+
+    def _send_frames(self, known: int) -> None:
+        """Hand out frames [sent, known): their poses and camera path are complete."""
+        renderer, layout = self._renderer, self._renderer._layout
+        assert layout is not None and self._qpos is not None
+        frames = resample_qpos(
+            layout, self._qpos, self.sim_fps, self._times_s[: known + self._ahead]
+        )
+        lookat = follow_lookat(layout, frames, self.fps, renderer.cfg)
+        new = slice(self._sent, known)
+        targets = None
+        if self._targets is not None:
+            # Step-hold, not interpolation: a marker shows the target of the sim step on screen.
+            idx = np.minimum(
+                (self._times_s[new] * self.sim_fps + 1e-9).astype(int), self.n_poses - 1
+            )
+            targets = self._targets[idx]
+        renderer._send(("frames", self._sent, frames[new], lookat[new], targets))
+        self._sent = known
+
+
+class RenderTask:
+    """A video being encoded by a `VideoRenderer` in a background thread."""
+
+    def __init__(
+        self,
+        renderer: VideoRenderer,
         args: list[str],
         out_path: Path,
-        audio: Path | None,
         n_frames: int,
         fps: float,
         progress: bool,
     ) -> None:
-        self.renderer, self.arrays, self.args = renderer, arrays, args
-        self.out_path, self.audio, self.n_frames, self.fps = out_path, audio, n_frames, fps
-        self.progress = progress
+        self.renderer, self.args, self.out_path = renderer, args, out_path
+        self.n_frames, self.fps, self.progress = n_frames, fps, progress
         self.total_start = time.perf_counter()
+        self.poses_done: float | None = None  # when the last pose came in
         self._result: dict[str, Any] | None = None
         self._error: BaseException | None = None
         self._thread = threading.Thread(target=self._run, name="quaddance-video", daemon=True)
@@ -858,7 +984,7 @@ def _encoder_args(
     if audio is not None:
         args += ["-ss", f"{audio_offset_s:.6f}", "-i", str(audio)]
     args += ["-map", "0:v:0", "-c:v", "libx264", "-pix_fmt", "yuv420p"]
-    args += ["-crf", str(cfg.crf), "-preset", cfg.preset]
+    args += ["-crf", str(cfg.crf), "-preset", cfg.preset, "-threads", str(cfg.encoder_threads)]
     if audio is not None:
         args += ["-map", "1:a:0?", "-c:a", "aac", "-b:a", cfg.audio_bitrate]
     args += ["-t", f"{n_frames / fps:.6f}", "-movflags", "+faststart", "-f", "mp4"]
