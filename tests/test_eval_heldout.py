@@ -227,17 +227,29 @@ def test_bench_ff_ablation_compares_both_runs_with_standing_still(tmp_path):
     bank = np.zeros((2, 100, 4), np.float32)
     bank[0, :50, 0] = 0.1  # mean |front target| = 0.1 * 50 / 400
     np.save(run / "bank.npy", bank)
+    same = tmp_path / "same"
+    same.mkdir()
+    _write_curve(same / "curve.csv", [0.03, 0.02, 0.018, 0.016])
     out, docs = tmp_path / "ablation.json", tmp_path / "docs"
     args = ["bench", "ff-ablation", str(run), "--shipped-curve", str(shipped)]
-    result = CliRunner().invoke(app, [*args, "--out", str(out), "--docs", str(docs)])
+    args += ["--with-ff-run", str(same), "--out", str(out), "--docs", str(docs)]
+    result = CliRunner().invoke(app, args)
     assert result.exit_code == 0, result.output
     data = json.loads(out.read_text())
     assert data["standing_still_front_err_m"] == pytest.approx(0.0125)
-    no_ff = {a["env_steps"]: a for a in data["runs"]["without feed-forward"]["at"]}
+    at = {name: {a["env_steps"]: a for a in r["at"]} for name, r in data["runs"].items()}
+    no_ff = at["without feed-forward"]
     assert no_ff[500_000]["front_abs_err_m"] == pytest.approx(0.024)
     assert no_ff[1_000_000]["front_abs_err_m"] is None  # the run never got there
-    shipped_at = {a["env_steps"]: a for a in data["runs"]["shipped"]["at"]}
-    assert shipped_at[1_000_000]["front_abs_err_m"] == pytest.approx(0.008)
+    assert at["with feed-forward (shipped run)"][1_000_000]["front_abs_err_m"] == pytest.approx(
+        0.008
+    )
+    # The window mean over (400 k, 500 k] env steps holds only the 4th row: 0.016.
+    same_at = at["with feed-forward, same settings"]
+    assert same_at[500_000]["front_abs_err_m"] == pytest.approx(0.016)
+    assert (docs / "learning_curve_with_feedforward_2M.csv").read_bytes() == (
+        same / "curve.csv"
+    ).read_bytes()
     assert (docs / "learning_curve_no_feedforward.csv").read_bytes() == (
         run / "curve.csv"
     ).read_bytes()

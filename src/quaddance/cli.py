@@ -738,14 +738,22 @@ def bench_ff_ablation_cmd(
     docs: Annotated[
         Path, typer.Option(help="Folder for the curve (csv, png) and the comparison plot.")
     ] = Path("docs/results"),
+    with_ff_run: Annotated[
+        Path | None,
+        typer.Option(
+            help="Run folder of the same training with the feed-forward on (same code and "
+            "settings): compared too, its curve copied to "
+            "DOCS/learning_curve_with_feedforward_2M.csv."
+        ),
+    ] = None,
 ) -> None:
-    """Training without the front-lift feed-forward next to the shipped run: front-foot error
+    """Training without the front-lift feed-forward next to runs with it: front-foot error
     and rear lift at 0.25-2 M env steps against the error of standing still; copies the
-    run's curve to DOCS/learning_curve_no_feedforward.csv (+ .png) and plots both runs in
+    run's curve to DOCS/learning_curve_no_feedforward.csv (+ .png) and plots the runs in
     DOCS/learning_curve_ff_ablation.png."""
     from quaddance.bench.ablation import run_ablation
 
-    result = run_ablation(run_dir, shipped_curve, out, docs)
+    result = run_ablation(run_dir, shipped_curve, out, docs, with_ff_run)
     still = result["standing_still_front_err_m"]
     print(f"standing still: front error {100 * still:.2f} cm")
     for name, run in result["runs"].items():
