@@ -333,11 +333,6 @@ class _WorkerSpec:
 #: the workers' uneven speed without holding the song in memory.
 _FRAMES_AHEAD = 8
 
-#: Niceness added to the render workers: they start up while the caller analyses the music
-#: and render while it simulates, and the caller is then the critical path, so on 2 cores
-#: it should keep a whole core (CFS weight 335 vs 1024 at 0); total work is unchanged.
-_WORKER_NICE = 5
-
 #: Sim steps between hand-outs of frames while poses stream in (0.5 s at 50 Hz): each
 #: hand-out recomputes the camera path of the frames so far, so not every step.
 _STREAM_EVERY = 25
@@ -369,7 +364,7 @@ def _next_job(jobs: Any) -> Any:
                 return None
 
 
-def _worker(spec: _WorkerSpec, jobs: Any, out: Any) -> None:
+def _worker(spec: _WorkerSpec, jobs: Any, out: Any, startup: Any) -> None:
     """Entry point of a rendering process.
 
     Start-up (model, EGL context, a warm-up frame: llvmpipe compiles its shaders on the
@@ -377,16 +372,24 @@ def _worker(spec: _WorkerSpec, jobs: Any, out: Any) -> None:
     what it is sent: chunks of frames ("frames", first index, qpos, lookat, targets or None)
     of which it takes every ``n_workers``-th frame from frame ``worker`` on, putting each
     image on ``out`` in order, until "end"; or ("stills", arrays, png paths).
+
+    The workers start up one at a time (``startup``, a semaphore): meanwhile the caller is
+    the critical path (music analysis) and keeps a core of a 2-core machine to itself.
     """
     try:
-        os.nice(_WORKER_NICE)
-        if spec.model_path is not None:
-            model = mujoco.MjModel.from_binary_path(str(spec.model_path))
-        else:
-            model = _default_model()
-        layout = QposLayout.of(model)
-        frames = FrameRenderer(model, spec.width, spec.height, spec.cfg)
-        frames.render(model.qpos0)
+        while not startup.acquire(timeout=1.0):
+            if not _parent_alive():
+                return
+        try:
+            if spec.model_path is not None:
+                model = mujoco.MjModel.from_binary_path(str(spec.model_path))
+            else:
+                model = _default_model()
+            layout = QposLayout.of(model)
+            frames = FrameRenderer(model, spec.width, spec.height, spec.cfg)
+            frames.render(model.qpos0)
+        finally:
+            startup.release()
         # Wall-clock time (comparable across processes) and this process's CPU so far.
         _put(out, ("ready", (layout, time.time(), time.process_time())))
         start = None
@@ -480,13 +483,15 @@ class VideoRenderer:
         # The workers inherit this environment; MuJoCo reads MUJOCO_GL when they import it.
         os.environ.setdefault("MUJOCO_GL", "egl")
         ctx = mp.get_context("spawn")
+        # Kept on self: the workers open it by name after __init__ has returned.
+        self._startup = startup = ctx.Semaphore(1)
         try:
             for i in range(workers):
                 spec = _WorkerSpec(i, workers, model_path, width, height, self.cfg)
                 # Unbounded: handing out frames must never hold up the simulation.
                 jobs = ctx.Queue()
                 out = ctx.Queue(maxsize=_FRAMES_AHEAD)
-                proc = ctx.Process(target=_worker, args=(spec, jobs, out), daemon=True)
+                proc = ctx.Process(target=_worker, args=(spec, jobs, out, startup), daemon=True)
                 proc.start()
                 self._jobs.append(jobs)
                 self._outs.append(out)
