@@ -247,7 +247,7 @@ def test_bench_ff_ablation_compares_both_runs_with_standing_still(tmp_path):
     # The window mean over (400 k, 500 k] env steps holds only the 4th row: 0.016.
     same_at = at["with feed-forward, same settings"]
     assert same_at[500_000]["front_abs_err_m"] == pytest.approx(0.016)
-    assert (docs / "learning_curve_with_feedforward_2M.csv").read_bytes() == (
+    assert (docs / "learning_curve_with_feedforward.csv").read_bytes() == (
         same / "curve.csv"
     ).read_bytes()
     assert (docs / "learning_curve_no_feedforward.csv").read_bytes() == (

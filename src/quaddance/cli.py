@@ -743,7 +743,7 @@ def bench_ff_ablation_cmd(
         typer.Option(
             help="Run folder of the same training with the feed-forward on (same code and "
             "settings): compared too, its curve copied to "
-            "DOCS/learning_curve_with_feedforward_2M.csv."
+            "DOCS/learning_curve_with_feedforward.csv."
         ),
     ] = None,
 ) -> None:

@@ -132,7 +132,7 @@ def run_ablation(
         tmp.write_bytes(curve.read_bytes())
     plot_learning_curve(docs_dir / "learning_curve_no_feedforward.png", curve)
     if with_ff_run is not None:
-        with atomic_path(docs_dir / "learning_curve_with_feedforward_2M.csv") as tmp:
+        with atomic_path(docs_dir / "learning_curve_with_feedforward.csv") as tmp:
             tmp.write_bytes((with_ff_run / "curve.csv").read_bytes())
     plot_compare(
         docs_dir / "learning_curve_ff_ablation.png", curves, result["standing_still_front_err_m"]
