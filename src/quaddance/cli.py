@@ -841,7 +841,9 @@ def bench_reach_cmd(
     tolerance: Annotated[
         float,
         typer.Option(
-            help="Bisect the edge of the sweep down to this, m.", callback=finite_in(1e-4, 0.1)
+            help="Bisect the edge of the sweep down to this, m (as large as the sweep's step: "
+            "no bisection).",
+            callback=finite_in(1e-4, 1.0),
         ),
     ] = 0.005,
 ) -> None:
