@@ -47,6 +47,7 @@ def _wav_bytes(y: np.ndarray, sr: int = SR, subtype: str = "FLOAT") -> bytearray
 
 # --- audio: header numbers ----------------------------------------------------------------------
 
+
 # Offsets in a canonical WAV header: channels at 22 (u16), sample rate at 24 (u32).
 @pytest.mark.parametrize(
     ("offset", "fmt", "value"),
@@ -454,7 +455,7 @@ def test_shipped_policy_json_round_trips_unchanged() -> None:
 def _set(meta: dict, dotted: str, value) -> None:
     *parents, last = dotted.split(".")
     for key in parents:
-        meta = meta[key]
+        meta = meta[int(key)] if isinstance(meta, list) else meta[key]
     if value is KeyError:
         del meta[last]
     else:
@@ -475,7 +476,10 @@ def _set(meta: dict, dotted: str, value) -> None:
         ("joint_names", ["x"] * 12, "joint_names: must be the Go1's joints"),
         ("version", "v" * 1000, "version: text of 1000 characters"),
         ("obs.history_len", 10**9, "obs.history_len: 1000000000 is not in [0, 100]"),
-        ("obs.layout", [{"name": "a", "size": -1}], "obs.layout[0].size: -1 is not in"),
+        ("obs.terms", [{"name": "a", "size": -1, "source": "imu"}], "obs.terms[0].size: -1 is not"),
+        ("obs.terms", [{"name": "a", "size": 3}], "obs.terms[0]: missing field source"),
+        ("obs.terms.0.source", "lidar", "obs.terms[0].source: 'lidar' is not one of imu"),
+        ("obs.terms.5.name", "proprio.foot_height_sim_m", "obs.terms[5]: is not the actor term"),
         ("task.obs.history_len", 4, "obs.history_len: disagrees with task.obs.history_len"),
         ("task.domain_rand.num_variants", 10**8, "task.domain_rand.num_variants: 100000000"),
         ("task.domain_rand.friction", [3.0, 0.1], "friction: the range's low end is above"),
@@ -540,3 +544,24 @@ def test_dance_file_with_an_unparsable_array_header(tmp_path) -> None:
         zf.writestr("fps.npy", member)
     with pytest.raises(InputFileError, match=r"tok.npz: cannot read as a dance .npz"):
         load_dance(path)
+
+
+def test_policy_json_of_an_older_version_with_obs_layout_still_loads(tmp_path) -> None:
+    """Files written before `obs.terms` list the same terms as `obs.layout`, without sources."""
+    import json
+
+    from quaddance.play.policy_spec import PolicySpec
+
+    _, meta = _shipped_json()
+    obs = meta["obs"]
+    obs["layout"] = [{"name": t["name"], "size": t["size"]} for t in obs.pop("terms")]
+    path = tmp_path / "policy.json"
+    path.write_text(json.dumps(meta))
+    spec = PolicySpec.load(path)
+    assert (
+        spec.obs_dim == sum(t.size for t in spec.obs_layout) and spec.obs_layout[0].source is None
+    )
+    both = dict(obs, terms=obs["layout"])
+    path.write_text(json.dumps(dict(meta, obs=both)))
+    with pytest.raises(InputFileError, match="exactly one of terms, layout"):
+        PolicySpec.load(path)

@@ -103,13 +103,22 @@ def test_load_an_exported_policy(standing_policy):
     assert policy.task.scene.kp == meta["kp"]
 
 
-def test_json_obs_dim_that_disagrees_with_the_onnx_input(standing_policy, tmp_path):
+def test_json_obs_dim_that_disagrees_with_its_terms(standing_policy, tmp_path):
     onnx_path = copy_policy(standing_policy, tmp_path / "p")
 
     def bump(meta):
         meta["obs"]["dim"] += 1
 
     edit_json(onnx_path, bump)
+    with pytest.raises(InputFileError, match="sum of the term sizes") as err:
+        OnnxPolicy.load(onnx_path)
+    assert err.value.path == onnx_path.with_suffix(".json")
+
+
+def test_onnx_input_that_disagrees_with_the_json(standing_policy, tmp_path):
+    """A model of another network beside a valid JSON: the error names the .onnx."""
+    onnx_path = copy_policy(standing_policy, tmp_path / "p")
+    torch.onnx.export(torch.nn.Linear(10, 12), (torch.zeros(1, 10),), str(onnx_path), dynamo=False)
     with pytest.raises(InputFileError, match="observations") as err:
         OnnxPolicy.load(onnx_path)
     assert err.value.path == onnx_path

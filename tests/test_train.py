@@ -133,7 +133,16 @@ def test_policy_json_describes_the_policy(trained):
     env = trained.trainer.env
     dim = env.obs_layout["actor_dim"]
     assert meta["obs"]["dim"] == dim == env.get_observations()["actor"].shape[1]
-    assert sum(item["size"] for item in meta["obs"]["layout"]) == dim
+    assert sum(item["size"] for item in meta["obs"]["terms"]) == dim
+    # Every actor term names the robot sensor it comes from: nothing privileged.
+    assert {t["source"] for t in meta["obs"]["terms"]} <= {
+        "imu",
+        "dance",
+        "joint_encoders",
+        "kinematics",
+        "previous_action",
+        "imu+joint_encoders+kinematics+previous_action",
+    }
     session = ort.InferenceSession(str(trained.onnx_path), providers=["CPUExecutionProvider"])
     assert session.get_inputs()[0].shape[-1] == dim
     assert meta["joint_names"] == list(go1.JOINT_NAMES)

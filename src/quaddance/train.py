@@ -379,7 +379,7 @@ def policy_metadata(env, cfg: TrainCfg, trainer: Trainer | None = None) -> dict:
         "sim_dt_s": task.scene.timestep_s,
         "decimation": task.decimation,
         "obs": {
-            "layout": env.obs_layout["actor"],
+            "terms": env.obs_layout["actor"],
             "dim": env.obs_layout["actor_dim"],
             "preview_s": list(task.obs.preview_s),
             "history_len": task.obs.history_len,

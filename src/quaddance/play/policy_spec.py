@@ -179,7 +179,8 @@ class PolicySpec:
             "sim_dt_s": self.sim_dt_s,
             "decimation": self.decimation,
             "obs": {
-                "layout": [
+                # The actor's terms in order, each with the robot sensor it comes from.
+                "terms": [
                     {"name": t.name, "size": t.size}
                     | ({} if t.source is None else {"source": t.source})
                     for t in self.obs_layout
@@ -424,17 +425,32 @@ def _read_feedforward(r: _Reader, value: Any, needed: bool) -> FeedForwardSpec |
     return FeedForwardSpec(heights, table, tuple(applies), r.text(obj, "interpolation", prefix=p))
 
 
+def _sources() -> tuple[str, ...]:
+    # Imported here: sim.observations imports torch, which `dance` loads only after it has
+    # started its render workers.
+    from quaddance.sim.observations import SOURCES
+
+    return SOURCES
+
+
 def _read_obs(r: _Reader, obj: dict) -> dict[str, Any]:
-    keys = ("layout", "dim", "preview_s", "history_len", "normalization")
-    obs = r.obj(obj["obs"], "obs", required=keys)
-    layout = obs["layout"]
+    keys = ("dim", "preview_s", "history_len", "normalization")
+    # `terms` (with sources) since the robot-measurable contract; `layout` in older files.
+    obs = r.obj(obj["obs"], "obs", required=keys, optional=("terms", "layout"))
+    key = "terms" if "terms" in obs else "layout"
+    if ("terms" in obs) == ("layout" in obs):
+        r.fail("obs", "needs exactly one of terms, layout")
+    layout = obs[key]
     if not isinstance(layout, list | tuple) or not 1 <= len(layout) <= 64:
-        r.fail("obs.layout", "must be a list of 1 to 64 terms")
+        r.fail(f"obs.{key}", "must be a list of 1 to 64 terms")
     terms = []
     for i, entry in enumerate(layout):
-        name = f"obs.layout[{i}]"
-        term = r.obj(entry, name, required=("name", "size"), optional=("source",))
+        name = f"obs.{key}[{i}]"
+        required = ("name", "size", "source") if key == "terms" else ("name", "size")
+        term = r.obj(entry, name, required=required, optional=("source",))
         source = None if "source" not in term else r.text(term, "source", 200, name + ".")
+        if source is not None and not set(source.split("+")) <= set(_sources()):
+            r.fail(name + ".source", f"{_short(source)} is not one of {', '.join(_sources())}")
         terms.append(
             ObsTerm(
                 r.text(term, "name", 100, name + "."),
@@ -535,3 +551,18 @@ def _check_agreement(r: _Reader, spec: PolicySpec) -> None:
     for name, value, other, other_value in observed:
         if value != other_value:
             r.fail(name, f"disagrees with {other}: the policy was trained with other observations")
+    # The terms must be the ones this code builds (sim/observations.py), in the same order.
+    from quaddance.sim.observations import actor_terms  # torch: only once a file is checked
+
+    ours = [
+        (t["name"], t["size"]) for t in actor_terms(cfg.obs.history_len, len(cfg.obs.preview_s))
+    ]
+    theirs = [(t.name, t.size) for t in spec.obs_layout]
+    if theirs != ours:
+        first = next(
+            (i for i, (a, b) in enumerate(zip(theirs, ours, strict=False)) if a != b),
+            min(len(theirs), len(ours)),
+        )
+        r.fail(f"obs.terms[{first}]", "is not the actor term this version of quaddance builds")
+    if sum(size for _, size in theirs) != spec.obs_dim:
+        r.fail("obs.dim", f"{spec.obs_dim} is not the sum of the term sizes")

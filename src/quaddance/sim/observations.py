@@ -151,24 +151,23 @@ class ActorObservation:
 
     def layout(self) -> list[dict]:
         """Actor terms in order: name, size and sensor source (the policy JSON's `obs.terms`)."""
-        terms = [
-            {"name": f"proprio.{t.name}", "size": t.size, "source": t.source} for t in PROPRIO_TERMS
-        ]
-        sources = sorted({t.source for t in PROPRIO_TERMS})
-        terms += [
-            {"name": f"history[{h}].proprio", "size": PROPRIO_DIM, "source": "+".join(sources)}
-            for h in range(1, self.history_len + 1)
-        ]
-        terms.append({"name": "front_targets_now_m", "size": 2, "source": "dance"})
-        if self.preview_steps:
-            terms.append(
-                {
-                    "name": "front_targets_preview_m",
-                    "size": 2 * len(self.preview_steps),
-                    "source": "dance",
-                }
-            )
-        return terms
+        return actor_terms(self.history_len, len(self.preview_steps))
+
+
+def actor_terms(history_len: int, n_preview: int) -> list[dict]:
+    """The actor's terms in order, each `{"name", "size", "source"}`."""
+    terms = [
+        {"name": f"proprio.{t.name}", "size": t.size, "source": t.source} for t in PROPRIO_TERMS
+    ]
+    history_source = "+".join(sorted({t.source for t in PROPRIO_TERMS}))
+    terms += [
+        {"name": f"history[{h}].proprio", "size": PROPRIO_DIM, "source": history_source}
+        for h in range(1, history_len + 1)
+    ]
+    terms.append({"name": "front_targets_now_m", "size": 2, "source": "dance"})
+    if n_preview:
+        terms.append({"name": "front_targets_preview_m", "size": 2 * n_preview, "source": "dance"})
+    return terms
 
 
 #: Critic-only terms: simulator quantities no robot measures (name, size, function).
