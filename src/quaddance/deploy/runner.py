@@ -2,7 +2,7 @@
 and sends joint commands through the `Safety` layer; then writes deploy.json and log.npz.
 
 The policy side (`DanceController`) builds the actor's observation with the training code's
-own `ActorObservation` and the joint targets with the task's own `DanceEnv.joint_targets`,
+own `ActorObservation` and the joint targets with the task's own `sim.task.joint_targets`,
 so what the policy sees and commands on a robot is what it saw and commanded in training.
 """
 
@@ -31,7 +31,7 @@ from quaddance.sim import go1
 from quaddance.sim.feedforward import FrontLiftFeedforward
 from quaddance.sim.kinematics import foot_pos_b
 from quaddance.sim.observations import ActorObservation, Measurement
-from quaddance.sim.task import DanceEnv
+from quaddance.sim.task import joint_targets
 
 #: Real-time priority of the runner; the simulated robot's (a separate machine's motor
 #: boards, in reality) is above it.
@@ -43,8 +43,8 @@ PROGRESS_S = 5.0  #: a progress line every this many dance seconds
 class DanceController:
     """One robot's policy step: reading -> observation -> action -> joint targets.
 
-    Duck-types the parts of `DanceEnv` that `DanceEnv.joint_targets` reads (nominal pose,
-    action scale, feed-forward, `targets_at`), so the joint-target law has one definition.
+    Joint targets come from the task's own `sim.task.joint_targets` (one definition of the
+    law), fed with the policy JSON's nominal pose, action scale and feed-forward table.
     """
 
     def __init__(self, policy: OnnxPolicy, targets_m: np.ndarray) -> None:
@@ -118,7 +118,9 @@ class DanceController:
         self.last_action = action
 
     def joint_targets(self, action: torch.Tensor) -> torch.Tensor:
-        return DanceEnv.joint_targets(self, action)  # type: ignore[arg-type]
+        return joint_targets(
+            action, self.nominal_joint_pos, self.action_scale, self.feedforward, self.targets_at
+        )
 
 
 @dataclass

@@ -37,12 +37,7 @@ def go1_joint_range_rad() -> np.ndarray:
 
 def effort_limits_nm() -> np.ndarray:
     """(12,) motor torque limits, model order (`quaddance.sim.go1`)."""
-    return np.array(
-        [
-            go1.KNEE_EFFORT_NM if n.endswith("calf_joint") else go1.HIP_EFFORT_NM
-            for n in go1.JOINT_NAMES
-        ]
-    )
+    return np.array([go1.effort_limit_nm(n) for n in go1.JOINT_NAMES])
 
 
 def roll_pitch_rad(projected_gravity_b: np.ndarray) -> tuple[float, float]:

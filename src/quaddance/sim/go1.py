@@ -41,4 +41,10 @@ KNEE_EFFORT_NM = 35.55
 HIP_ARMATURE = ROTOR_INERTIA * HIP_GEAR_RATIO**2
 KNEE_ARMATURE = ROTOR_INERTIA * KNEE_GEAR_RATIO**2
 
+
+def effort_limit_nm(joint_name: str) -> float:
+    """Motor torque limit of one joint, N m (knees geared 1.5x the hips)."""
+    return KNEE_EFFORT_NM if joint_name.endswith("calf_joint") else HIP_EFFORT_NM
+
+
 INIT_BASE_HEIGHT_M = 0.325  # spawn height with the feet on the floor; settles to 0.27 m

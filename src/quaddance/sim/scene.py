@@ -112,7 +112,7 @@ def build_spec(cfg: SceneCfg = SceneCfg(), visual: bool = True) -> mujoco.MjSpec
         joint = spec.joint(name)
         is_knee = name.endswith("calf_joint")
         joint.armature = go1.KNEE_ARMATURE if is_knee else go1.HIP_ARMATURE
-        effort = go1.KNEE_EFFORT_NM if is_knee else go1.HIP_EFFORT_NM
+        effort = go1.effort_limit_nm(name)
         act = spec.add_actuator(name=name.removesuffix("_joint"), target=name)
         act.trntype = mujoco.mjtTrn.mjTRN_JOINT
         act.set_to_position(kp=cfg.kp, kv=cfg.kd)

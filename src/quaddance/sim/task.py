@@ -7,6 +7,8 @@ playback (one env, no randomisation) use this same class.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import torch
 
@@ -34,6 +36,22 @@ def sample_dynamics(cfg: DanceTaskCfg, rng: np.random.Generator) -> np.ndarray:
     )
     rows[0] = nominal[0]  # always keep the nominal robot among the variants
     return rows
+
+
+def joint_targets(
+    actions: torch.Tensor,
+    nominal_joint_pos: torch.Tensor,
+    action_scale: torch.Tensor,
+    feedforward: FrontLiftFeedforward | None,
+    targets_at: Callable[[int], torch.Tensor],
+) -> torch.Tensor:
+    """(N, 12) PD targets: nominal pose + scaled actions + the front-lift feed-forward for the
+    targets due after this step (the contract written into the policy's JSON). Training and
+    the robot runner (deploy/) both call this."""
+    target = nominal_joint_pos + action_scale * actions
+    if feedforward is not None:
+        target = target + feedforward(targets_at(1)[:, :2])
+    return target
 
 
 class DanceEnv:
@@ -169,12 +187,9 @@ class DanceEnv:
         return self.get_observations(), reward, done, extras
 
     def joint_targets(self, actions: torch.Tensor) -> torch.Tensor:
-        """PD targets: nominal pose + front-lift feed-forward for the targets due after this
-        step + scaled actions (the contract written into the policy's JSON)."""
-        target = self.nominal_joint_pos + self.action_scale * actions
-        if self.feedforward is not None:
-            target = target + self.feedforward(self.targets_at(1)[:, :2])
-        return target
+        return joint_targets(
+            actions, self.nominal_joint_pos, self.action_scale, self.feedforward, self.targets_at
+        )
 
     # --- internals -------------------------------------------------------------------------------
     def _lagged_controls(self) -> torch.Tensor:
