@@ -8,7 +8,9 @@ cd "$(dirname "$0")/.."
 
 # Mesa's EGL (software rendering for videos) and fluidsynth + a General MIDI soundfont
 # (`quaddance bench beats`).
-sys_pkgs=(libegl1 libegl-mesa0 libgl1-mesa-dri libgles2 fluidsynth fluid-soundfont-gm)
+sys_pkgs=(libegl1 libegl-mesa0 libgl1-mesa-dri libgles2 fluidsynth fluid-soundfont-gm libportaudio2)
+# Chromium, with its own software WebGL (SwiftShader): the test of the live viewer's page.
+sys_pkgs+=(chromium)
 missing=()
 for p in "${sys_pkgs[@]}"; do
   dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")

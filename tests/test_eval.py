@@ -36,6 +36,9 @@ METRICS_JSON_KEYS = {
     "source",
     "policy",
     "mode",
+    "body",
+    "beat_coverage",
+    "clamped",
     "timings_s",
 }
 

@@ -541,3 +541,94 @@ def test_unknown_format_garbage_and_truncated_bvh_are_errors(tmp_path):
     renamed = tmp_path / "full.mocap"
     renamed.write_bytes(text)
     assert load_motion(renamed).feet_m.shape == (48, 2)
+
+
+# ---------------------------------------------------------------------------------------------
+# trunk (body) curves
+
+
+def test_bvh_moving_root_becomes_body_curves_without_drift(tmp_path):
+    """The root bobs, rolls, pitches and turns (yaw about up, then pitch, then roll: the
+    channel order Y X Z) while walking off and turning round slowly: the body curves are
+    the bob and the angles, the slow walk and turn removed."""
+    fps, n_frames = 30, 360
+    t = np.arange(n_frames) / fps
+    bob_cm = 4.0 * np.sin(2 * np.pi * 1.0 * t)
+    roll_deg = 10.0 * np.sin(2 * np.pi * 0.5 * t)
+    pitch_deg = 6.0 * np.sin(2 * np.pi * 1.0 * t + 1.0)
+    yaw_deg = 8.0 * np.sin(2 * np.pi * 0.5 * t) + 30.0 * t / t[-1]  # plus a slow turn
+    hierarchy = _BVH_HIERARCHY.replace(
+        "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation",
+        "CHANNELS 6 Xposition Yposition Zposition Yrotation Xrotation Zrotation",
+    )
+    lines = [hierarchy + "MOTION", f"Frames: {n_frames}", f"Frame Time: {1 / fps:.6f}"]
+    for k in range(n_frames):
+        # Y-up, cm, facing +z (the toes), left hip at +x.
+        root = [2.0 * k, 100.0 + bob_cm[k], 1.0 * k, yaw_deg[k], pitch_deg[k], roll_deg[k]]
+        lines.append(" ".join(f"{v:.5f}" for v in root + [0.0] * 21))
+    path = tmp_path / "dance.bvh"
+    path.write_text("\n".join(lines) + "\n")
+
+    motion = load_motion(path)
+    assert motion.body.shape == (n_frames, 4)
+    inner = slice(2 * fps, n_frames - 2 * fps)  # the drift window's edges aside
+    np.testing.assert_allclose(motion.body[inner, 0], bob_cm[inner] / 100, atol=2e-3)
+    # roll > 0: left side up; pitch > 0: nose down (a positive x rotation tips +z down);
+    # yaw > 0: turned left (a positive y rotation turns +z towards +x, the left).
+    np.testing.assert_allclose(np.rad2deg(motion.body[inner, 1]), roll_deg[inner], atol=0.5)
+    np.testing.assert_allclose(np.rad2deg(motion.body[inner, 2]), pitch_deg[inner], atol=0.5)
+    wiggle = yaw_deg - 30.0 * t / t[-1]
+    np.testing.assert_allclose(np.rad2deg(motion.body[inner, 3]), wiggle[inner], atol=0.5)
+
+    # make_dance scales them into the robot's range and keeps its limits.
+    from quaddance.pipeline import make_dance
+    from quaddance.targets import BODY_LIMITS_FOUR_FEET
+
+    dance, _ = make_dance(None, path)
+    body = dance.body_targets
+    assert np.all(body >= BODY_LIMITS_FOUR_FEET.low - 1e-9)
+    assert np.all(body <= BODY_LIMITS_FOUR_FEET.high + 1e-9)
+    roll_50 = np.interp(dance.time_s, t, roll_deg)
+    assert np.corrcoef(body[100:-100, 1], roll_50[100:-100])[0, 1] > 0.95
+    assert np.ptp(body[:, 0]) > 0.04  # an 8 cm bob, scaled into the (paw-up) range
+
+
+def test_bvh_without_hips_keeps_only_the_height(tmp_path):
+    # Ankles hung straight off the root: no knee-hip chain, so no trunk orientation.
+    text = (
+        "HIERARCHY\nROOT Hips\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition "
+        "Zrotation Xrotation Yrotation\n JOINT LeftFoot\n {\n  OFFSET 10 -90 0\n  CHANNELS 0\n"
+        "  End Site\n  {\n   OFFSET 0 -5 10\n  }\n }\n JOINT RightFoot\n {\n  OFFSET -10 -90 0\n"
+        "  CHANNELS 0\n  End Site\n  {\n   OFFSET 0 -5 10\n  }\n }\n}\nMOTION\n"
+    )
+    n_frames, fps = 200, 50
+    t = np.arange(n_frames) / fps
+    rows = [
+        f"0 {100 + 3 * np.sin(2 * np.pi * t[k]):.4f} 0 {20 * np.sin(t[k]):.4f} 0 0"
+        for k in range(n_frames)
+    ]
+    path = tmp_path / "nohips.bvh"
+    path.write_text(text + f"Frames: {n_frames}\nFrame Time: 0.02\n" + "\n".join(rows) + "\n")
+    motion = load_motion(path)
+    assert not motion.body[:, 1:].any()
+    assert np.ptp(motion.body[:, 0]) > 0.04
+
+
+def test_aist_global_orientation_becomes_roll(tmp_path):
+    fps, n_frames = 60, 480
+    t = np.arange(n_frames) / fps
+    roll = 0.2 * np.sin(2 * np.pi * t)
+    poses = np.zeros((n_frames, 72))
+    poses[:, 2] = roll  # about +z, the way the rest body faces: the left side (+x) goes up
+    path = _write_pickle(
+        tmp_path / "aist.pkl",
+        {
+            "smpl_poses": poses,
+            "smpl_trans": np.tile([0.0, 1.0, 0.0], (n_frames, 1)),
+            "smpl_scaling": np.array([1.0]),
+        },
+    )
+    motion = load_motion(path)
+    inner = slice(2 * fps, n_frames - 2 * fps)
+    np.testing.assert_allclose(motion.body[inner, 1], roll[inner], atol=0.02)
+    assert np.abs(motion.body[inner, 3]).max() < 0.02

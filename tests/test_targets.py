@@ -16,7 +16,7 @@ import quaddance.choreo.motion as motion_module
 from quaddance.choreo.choreographer import choreograph
 from quaddance.choreo.grid import synthetic_grid
 from quaddance.cli import app
-from quaddance.dancefile import KEYS, Dance, load_dance, save_dance
+from quaddance.dancefile import KEYS, OPTIONAL_KEYS, Dance, load_dance, save_dance
 from quaddance.errors import InputFileError, QuaddanceError
 from quaddance.pipeline import make_dance, target_bank
 from quaddance.targets import TargetConfig, robot_targets
@@ -266,7 +266,7 @@ def test_dance_round_trip(tmp_path):
     save_dance(path, dance)  # overwriting works and leaves no temporary files
     assert sorted(p.name for p in tmp_path.iterdir()) == ["dance.npz"]
     with np.load(path, allow_pickle=False) as npz:
-        assert sorted(npz.files) == sorted(KEYS)
+        assert sorted(npz.files) == sorted(KEYS + OPTIONAL_KEYS)
     loaded = load_dance(path)
     for field in dataclasses.fields(Dance):
         a, b = getattr(dance, field.name), getattr(loaded, field.name)
@@ -283,7 +283,11 @@ def write_npz(path: Path, **arrays: np.ndarray) -> Path:
 
 
 def dance_arrays(dance: Dance) -> dict[str, np.ndarray]:
-    arrays = {f.name: np.asarray(getattr(dance, f.name)) for f in dataclasses.fields(Dance)}
+    arrays = {
+        f.name: np.asarray(getattr(dance, f.name))
+        for f in dataclasses.fields(Dance)
+        if f.name != "clamp_report"  # not part of the file
+    }
     for key in ("mode", "source", "version"):
         arrays[key] = np.array(arrays[key], dtype=np.str_)
     return arrays

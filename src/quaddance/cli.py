@@ -6,7 +6,7 @@ import dataclasses
 import math
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -44,7 +44,6 @@ def finite_in(lo: float, hi: float):
         return value
 
     return check
-
 
 
 # --- music -----------------------------------------------------------------------------------
@@ -139,8 +138,18 @@ def choreograph_cmd(
     style: Annotated[
         str, typer.Option(help="Choreographer style: mixed, calm, energetic or footwork.")
     ] = "mixed",
+    moves: Annotated[
+        Path | None,
+        typer.Option(help="TOML file of extra body moves and styles (see choreo/moves_file.py)."),
+    ] = None,
+    check: Annotated[
+        bool,
+        typer.Option(
+            "--check", help="Only report what feasible targets clamp (paws, body); write nothing."
+        ),
+    ] = False,
 ) -> None:
-    """Turn a song (or a human motion file) into robot foot-height targets, dance.npz."""
+    """Turn a song (or a human motion file) into robot foot-height and body targets, dance.npz."""
     import numpy as np
     from rich.console import Console
     from rich.table import Table
@@ -158,15 +167,24 @@ def choreograph_cmd(
     for path in (song, motion):
         if path is not None and not path.is_file():
             raise InputFileError(path, "no such file")
-    check_output_file(out)  # before the work, not after it
+    move_set = None
+    if moves is not None:
+        from quaddance.choreo.moves_file import load_moves
+
+        move_set = load_moves(moves)  # before the work: a bad file fails in a moment
+    if not check:
+        check_output_file(out)  # before the work, not after it
     cfg = TargetConfig(mode=mode, h0_m=h0, scale=scale)
     if max_height is not None:
         cfg = dataclasses.replace(cfg, max_height_m=max_height)
     console = Console(stderr=True)
     with console.status("Analysing the music and choreographing..."):
         dance, analysis = make_dance(
-            song, motion, mode=mode, seed=seed, target_cfg=cfg, style=style
+            song, motion, mode=mode, seed=seed, target_cfg=cfg, style=style, moves=move_set
         )
+    if check:
+        _print_clamp_report(dance)
+        return
     save_dance(out, dance)
 
     front = dance.targets_m[:, :2]
@@ -184,6 +202,47 @@ def choreograph_cmd(
     table.add_row("highest target", f"{front.max():.3f} m")
     table.add_row("a front foot up", f"{100 * up.any(axis=1).mean():.0f} % of the time")
     table.add_row("both front feet up", f"{100 * up.all(axis=1).mean():.0f} % of the time")
+    body = dance.body_targets
+    table.add_row(
+        "trunk range",
+        f"height {body[:, 0].min():+.3f}..{body[:, 0].max():+.3f} m, roll/pitch/yaw "
+        + " / ".join(f"{np.rad2deg(np.ptp(body[:, c])):.0f}" for c in (1, 2, 3))
+        + " deg",
+    )
+    Console().print(table)
+
+
+def _print_clamp_report(dance: Any) -> None:
+    """The table of ``choreograph --check``: what feasible targets clamped, and by how much."""
+    import numpy as np
+    from rich.console import Console
+    from rich.table import Table
+
+    from quaddance.targets import BODY_COLUMNS
+
+    report = dance.clamp_report or {}
+    paw = report.get("paw", {})
+    table = Table(title=f"clamp check: {dance.source}")
+    for name in ("what", "clamped", "max", "mean"):
+        table.add_column(name)
+    table.add_row(
+        "paw lifts",
+        f"{paw.get('human_lifts', 0)} human -> {paw.get('robot_lifts', 0)} robot "
+        f"({paw.get('dropped_or_merged', 0)} dropped or merged)",
+        f"{paw.get('clipped_to_max_height', 0)} clipped to {paw.get('max_height_m', 0):.2f} m",
+        f"highest {paw.get('highest_target_m', 0):.3f} m",
+    )
+    body = report.get("body", {})
+    n = max(int(body.get("samples", 0)), 1)
+    for name in BODY_COLUMNS:
+        col = body.get(name, {"clamped": 0, "max": 0.0, "mean": 0.0})
+        unit, scale = ("m", 1.0) if name.endswith("_m") else ("deg", float(np.rad2deg(1.0)))
+        table.add_row(
+            f"body {name}",
+            f"{col['clamped']} samples ({100 * col['clamped'] / n:.0f} %)",
+            f"{col['max'] * scale:.3f} {unit}",
+            f"{col['mean'] * scale:.4f} {unit}",
+        )
     Console().print(table)
 
 
@@ -244,6 +303,21 @@ def train_cmd(
             "the feet (the ablation where PPO stands still).",
         ),
     ] = True,
+    whole_body: Annotated[
+        bool,
+        typer.Option(
+            "--whole-body/--paws-only",
+            help="Whole-body dance: the bank has body targets (trunk height, roll, pitch, "
+            "yaw), the actor sees them, rewards track them, a body feed-forward moves the legs.",
+        ),
+    ] = False,
+    init_from: Annotated[
+        Path | None,
+        typer.Option(
+            help="Start from another run's checkpoint.pt: shared inputs keep their weights, new "
+            "ones (e.g. --whole-body's body targets) start at zero weight."
+        ),
+    ] = None,
 ) -> None:
     """Train the dance policy with PPO; exports RUN_DIR/policy.onnx and policy.json."""
     from rich.console import Console
@@ -273,7 +347,8 @@ def train_cmd(
         max_height_m=max_height,
         checkpoint_every_s=checkpoint_every,
         max_minutes=minutes,
-        task=DanceTaskCfg(front_feedforward=feedforward),
+        init_from=init_from,
+        task=DanceTaskCfg(front_feedforward=feedforward, whole_body=whole_body),
     )
     with console.status("Building the target bank (first run only) and the envs..."):
         from quaddance.fileio import ensure_dir
@@ -310,8 +385,14 @@ def dance_cmd(
     randomize: Annotated[
         bool, typer.Option(help="Randomise the robot's dynamics as in training.")
     ] = False,
+    style: Annotated[str, typer.Option(help="Choreography style.")] = "mixed",
+    moves: Annotated[
+        Path | None,
+        typer.Option(help="TOML file of extra body moves and styles (see choreo/moves_file.py)."),
+    ] = None,
 ) -> None:
-    """Make the Go1 dance to a song: dance.mp4 (with the music), feet.png, metrics.json."""
+    """Make the Go1 dance to a song: dance.mp4 (with the music), feet.png, metrics.json,
+    dance.npz and rollout.npz."""
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
@@ -341,6 +422,8 @@ def dance_cmd(
         seed=seed,
         video=not no_video,
         randomize=randomize,
+        style=style,
+        moves=moves,
     )
     progress = Progress(
         TextColumn("{task.description}"),
@@ -424,9 +507,19 @@ def deploy_cmd(
 
     console = Console(stderr=True)
     job = DeployJob(
-        out_dir=out, robot=robot, song=song, motion=motion, dance=dance, demo=demo,
-        policy=policy, seconds=seconds, auto_start=auto_start, inject=parse_inject(inject),
-        robot_ip=robot_ip, power_level=power_level, sim_latency_ms=sim_latency_ms,
+        out_dir=out,
+        robot=robot,
+        song=song,
+        motion=motion,
+        dance=dance,
+        demo=demo,
+        policy=policy,
+        seconds=seconds,
+        auto_start=auto_start,
+        inject=parse_inject(inject),
+        robot_ip=robot_ip,
+        power_level=power_level,
+        sim_latency_ms=sim_latency_ms,
     )
     summary, paths = run_deploy(job, status=lambda msg: console.log(msg))
     front = summary["front"] or {}
@@ -436,6 +529,91 @@ def deploy_cmd(
         f"falls {summary['falls']}, front MAE "
         + (f"{100 * sum(mae) / len(mae):.1f} cm" if mae else "n/a")
         + f", tick p99 {summary['tick_ms']['p99']} ms"
+    )
+    for name, path in paths.items():
+        console.print(f"{name}: {path}")
+
+
+@app.command("live")
+def live_cmd(
+    from_file: Annotated[
+        Path | None,
+        typer.Option(
+            "--from-file",
+            help="Feed this song through the live path at real-time pace (default: microphone).",
+        ),
+    ] = None,
+    device: Annotated[
+        str | None, typer.Option(help="Microphone or line-in (sounddevice name or index).")
+    ] = None,
+    robot: Annotated[
+        str, typer.Option(help="sim (a simulated Go1 in another process) or go1 (a real one).")
+    ] = "sim",
+    policy: Annotated[
+        Path | None, typer.Option(help="Policy .onnx (its .json beside it); default: shipped.")
+    ] = None,
+    seconds: Annotated[
+        float | None,
+        typer.Option(
+            help="Dance this long, s (default: the file's length; 60 s from a microphone).",
+            callback=finite_in(0.5, 3600.0),
+        ),
+    ] = None,
+    viewer: Annotated[
+        bool, typer.Option("--viewer", help="Serve a web page showing the robot, tempo, beats.")
+    ] = False,
+    host: Annotated[
+        str, typer.Option(help="Viewer address; 0.0.0.0 lets other machines watch.")
+    ] = "127.0.0.1",
+    port: Annotated[int, typer.Option(help="Viewer port.", min=1, max=65535)] = 8080,
+    video: Annotated[
+        bool, typer.Option("--video", help="With --from-file: write dance.mp4 afterwards.")
+    ] = False,
+    style: Annotated[str, typer.Option(help="Choreography style.")] = "mixed",
+    seed: Annotated[int, typer.Option(help="Choreography seed.", **SeedRange)] = 0,
+    out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")] = Path("live_out"),
+    robot_ip: Annotated[str, typer.Option(help="go1: the robot's low-level IP.")] = (
+        "192.168.123.10"
+    ),
+    power_level: Annotated[
+        int, typer.Option(help="go1: SDK PowerProtect level, 1 (10 %) to 10.", min=1, max=10)
+    ] = 1,
+) -> None:
+    """Dance to music as it plays: online beat tracking, a dance planned a bar ahead, the
+    robot on the wall clock (same runner and safety layer as deploy). Writes live.json,
+    rollout.npz, deploy.json and log.npz (and dance.mp4 with --video)."""
+    from rich.console import Console
+
+    from quaddance.choreo.choreographer import STYLES
+    from quaddance.live.session import LiveJob, run_live
+
+    if style not in STYLES:
+        raise typer.BadParameter(f"--style must be one of {', '.join(sorted(STYLES))}")
+    console = Console(stderr=True)
+    job = LiveJob(
+        out_dir=out,
+        from_file=from_file,
+        device=device,
+        robot=robot,
+        policy=policy,
+        seconds=seconds,
+        viewer=viewer,
+        host=host,
+        port=port,
+        video=video,
+        seed=seed,
+        style=style,
+        robot_ip=robot_ip,
+        power_level=power_level,
+    )
+    summary, paths = run_live(job, status=lambda msg: console.log(msg))
+    lock = summary["lock_s"]
+    console.print(
+        f"danced {summary['duration_s']:.1f} s, falls {summary['falls']}, "
+        + (f"beat locked at {lock:.1f} s" if lock is not None else "no beat lock")
+        + f", {len(summary['beats_s'])} beats, latency p50/p99 "
+        f"{summary['latency_ms']['p50']} / {summary['latency_ms']['p99']} ms, "
+        f"loop p99 {summary['loop_ms']['p99']} ms"
     )
     for name, path in paths.items():
         console.print(f"{name}: {path}")
@@ -528,6 +706,65 @@ def eval_cmd(
 
 # --- benchmarks ------------------------------------------------------------------------------
 # (bench subcommands: beats, choreograph, train, dance, reach)
+
+
+@bench_app.command("live")
+def bench_live_cmd(
+    out: Annotated[
+        Path, typer.Option("--out", "-o", help="Where to write the JSON results.")
+    ] = Path("benchmarks/results/live.json"),
+    sets: Annotated[
+        str,
+        typer.Option(help="Tracker sets, comma-separated: random, untuned, live (tuning too)."),
+    ] = "random,untuned,live",
+    random: Annotated[
+        int, typer.Option(help="Songs in the random MIDI set.", min=0, max=1000)
+    ] = 12,
+    dance: Annotated[
+        bool,
+        typer.Option(
+            "--dance/--tracker-only",
+            help="Also run `live --from-file` in real time on the live songs (about 2 min).",
+        ),
+    ] = True,
+) -> None:
+    """Online beat tracking vs the offline analyser (lock time, F-measure) on songs with exact
+    beats not tuned on; then the whole live loop on the simulated robot: falls, loop time,
+    latency, the robot's motion accents on the true beats. Writes JSON."""
+    import tempfile
+
+    from rich.console import Console
+
+    from quaddance.bench.live import bench_live_dance, bench_live_tracker, machine_info
+    from quaddance.fileio import write_json
+
+    console = Console(stderr=True)
+    chosen = tuple(s.strip() for s in sets.split(",") if s.strip())
+    with console.status("Tracking beats online...") as status:
+        results = {
+            "tracker": bench_live_tracker(
+                chosen, n_random=random, progress=lambda n: status.update(f"Tracking {n}...")
+            )
+        }
+    for name, m in results["tracker"]["means"].items():
+        console.print(
+            f"{name}: {m['n_locked']}/{m['n_songs']} locked, median lock {m['lock_s_median']} s,"
+            f" F online {m['f_online']:.3f} vs offline {m['f_offline']:.3f}"
+        )
+    if dance:
+        with tempfile.TemporaryDirectory(prefix="quaddance-bench-live-") as tmp:
+            results["dance"] = bench_live_dance(
+                Path(tmp), progress=lambda n: console.log(f"live dance: {n}")
+            )
+        for r in results["dance"]["songs"]:
+            console.print(
+                f"{r['name']}: lock {r['lock_s']} s, falls {r['falls']}, accents on "
+                f"{100 * r['accent_coverage_after_lock']:.0f} % of beats (median "
+                f"{r['accent_median_offset_ms']} ms), loop p99 {r['loop_ms']['p99']} ms"
+            )
+    results["machine"] = machine_info()
+    write_json(out, results)
+    console.print(f"results: {out}")
 
 
 @bench_app.command("beats")
@@ -820,6 +1057,38 @@ def bench_deploy_cmd(
         + ", ".join(f"{k} {v['time_to_damp_s']}" for k, v in results["faults"].items())
         + f" -> {out}"
     )
+
+
+@bench_app.command("body-reach")
+def bench_body_reach_cmd(
+    out: Annotated[
+        Path, typer.Option("--out", "-o", help="Where to write the JSON results.")
+    ] = Path("benchmarks/results/body_reach.json"),
+    policy: Annotated[
+        Path | None,
+        typer.Option(help="A whole-body policy .onnx to balance; default: feed-forward alone."),
+    ] = None,
+) -> None:
+    """The trunk poses (height, roll, pitch, yaw) a Go1 holds with four feet down and with a
+    front paw up: a sweep per column and sign, the range held without a fall, a foot lifting
+    or sliding, or the trunk missing the pose by more than 35 %. Writes JSON."""
+    from rich.console import Console
+
+    from quaddance.bench.body_reach import bench_body_reach
+    from quaddance.bench.live import machine_info
+    from quaddance.fileio import write_json
+    from quaddance.play.policy import OnnxPolicy
+
+    console = Console(stderr=True)
+    loaded = None if policy is None else OnnxPolicy.load(policy)
+    with console.status("Sweeping trunk poses..."):
+        results = bench_body_reach(loaded)
+    results["machine"] = machine_info()
+    for which in ("four_feet", "paw_up"):
+        ranges = ", ".join(f"{k} {lo:+g}..{hi:+g}" for k, (lo, hi) in results[which].items())
+        console.print(f"{which}: {ranges}")
+    write_json(out, results)
+    console.print(f"results: {out}")
 
 
 @bench_app.command("reach")

@@ -16,7 +16,13 @@ mode           () unicode   target mode: feasible, paper or minmax
 source         () unicode   where the dance came from (song or motion file)
 seed           () int       choreographer seed
 version        () unicode   quaddance version that wrote the file
+body_targets   (T, 4)       trunk height offset m, roll, pitch, yaw rad (format 2;
+                            missing in format 1 files: read as zeros)
+format         () int       dance format: 2 (missing in format 1 files)
 =============  ===========  =====================================================
+
+`Dance.clamp_report` (what feasible mode clamped, from `quaddance.pipeline.make_dance`) is
+not stored.
 """
 
 from __future__ import annotations
@@ -56,6 +62,14 @@ KEYS: tuple[str, ...] = (
     "version",
 )
 _STRING_KEYS = ("mode", "source", "version")
+#: Keys a file may lack: format 1 files (before whole-body dances) have neither.
+OPTIONAL_KEYS: tuple[str, ...] = ("body_targets", "format")
+#: Dance format written: 1 = feet only, 2 = adds ``body_targets`` (T, 4).
+FORMAT_VERSION = 2
+#: Largest |trunk height offset|, m, and |trunk angle|, rad, read from ``body_targets``
+#: (the same values as `quaddance.targets.BODY_FILE_MAX_*`, not imported: keep this light).
+MAX_BODY_HEIGHT_M = 0.2
+MAX_BODY_ANGLE_RAD = 1.0
 
 MAX_DANCE_S = 30 * 60.0
 """Longest dance read, s (the longest song, 20 min, plus room for a long motion file)."""
@@ -88,6 +102,9 @@ class Dance:
         source: where the dance came from.
         seed: choreographer seed.
         version: quaddance version that made it.
+        body_targets: (T, 4) trunk targets relative to standing: height offset (m), roll,
+            pitch, yaw (rad); `quaddance.targets.BODY_COLUMNS`. None -> zeros.
+        clamp_report: what feasible mode clamped (`make_dance`), or None; not saved.
     """
 
     fps: float
@@ -100,6 +117,12 @@ class Dance:
     source: str
     seed: int
     version: str
+    body_targets: np.ndarray | None = None
+    clamp_report: dict | None = None
+
+    def __post_init__(self) -> None:
+        if self.body_targets is None:
+            self.body_targets = np.zeros((np.asarray(self.time_s).size, 4))
 
     @property
     def duration_s(self) -> float:
@@ -117,6 +140,8 @@ def save_dance(path: str | Path, dance: Dance) -> None:
         "beats_s": np.asarray(dance.beats_s, dtype=np.float64).reshape(-1),
         "downbeats_s": np.asarray(dance.downbeats_s, dtype=np.float64).reshape(-1),
         "seed": np.int64(dance.seed),
+        "body_targets": np.asarray(dance.body_targets, dtype=np.float64),
+        "format": np.int64(FORMAT_VERSION),
     }
     for key in _STRING_KEYS:
         arrays[key] = np.array(str(getattr(dance, key)), dtype=np.str_)
@@ -141,7 +166,7 @@ def load_dance(path: str | Path) -> Dance:
             missing = [key for key in KEYS if key not in npz.files]
             if missing:
                 raise InputFileError(path, f"not a dance file: missing {', '.join(missing)}")
-            raw = {key: npz[key] for key in KEYS}
+            raw = {key: npz[key] for key in KEYS + OPTIONAL_KEYS if key in npz.files}
     except InputFileError:
         raise
     except _ARCHIVE_ERRORS as err:
@@ -161,7 +186,7 @@ def _check_headers(path: Path) -> None:
             raise InputFileError(path, f"not a dance file: {len(members)} arrays in the archive")
         for info in members:
             key = info.filename.removesuffix(".npy")
-            if key not in KEYS:
+            if key not in KEYS + OPTIONAL_KEYS:
                 continue  # extra members are never read
             with zf.open(info) as fh:
                 version = np.lib.format.read_magic(fh)
@@ -254,6 +279,24 @@ def _check(path: Path, raw: dict[str, np.ndarray]) -> Dance:
     seed = int(number("seed", "iu"))
     if not 0 <= seed < 2**63:
         raise InputFileError(path, f"seed must be in [0, 2**63), got {seed}")
+    if "format" in raw:
+        fmt = int(number("format", "iu"))
+        if not 1 <= fmt <= FORMAT_VERSION:
+            raise InputFileError(
+                path, f"format {fmt} is not one this quaddance reads (1 to {FORMAT_VERSION})"
+            )
+    body = np.zeros((n, 4))
+    if "body_targets" in raw:
+        body = curve("body_targets", 2, -MAX_BODY_ANGLE_RAD, MAX_BODY_ANGLE_RAD)
+        if body.shape != (n, 4):
+            raise InputFileError(path, f"body_targets must have shape ({n}, 4), got {body.shape}")
+        height = np.abs(body[:, 0]).max(initial=0.0)
+        if height > MAX_BODY_HEIGHT_M:
+            raise InputFileError(
+                path,
+                f"body_targets height offset reaches {height:.4g} m, beyond "
+                f"+-{MAX_BODY_HEIGHT_M:g} m",
+            )
     return Dance(
         fps=fps,
         time_s=time_s,
@@ -265,4 +308,5 @@ def _check(path: Path, raw: dict[str, np.ndarray]) -> Dance:
         source=text("source"),
         seed=seed,
         version=text("version"),
+        body_targets=body,
     )

@@ -14,11 +14,20 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 import quaddance
+from quaddance.choreo.body import MoveSet, choreograph_body
 from quaddance.choreo.choreographer import STYLES, choreograph
 from quaddance.choreo.grid import MusicGrid, synthetic_grid
 from quaddance.dancefile import Dance
 from quaddance.errors import QuaddanceError
-from quaddance.targets import TargetConfig, TargetMode, resample, robot_targets
+from quaddance.targets import (
+    TargetConfig,
+    TargetMode,
+    feasible_body_targets,
+    fit_body,
+    paw_clamp_report,
+    resample,
+    robot_targets,
+)
 
 if TYPE_CHECKING:
     from quaddance.music.analysis import Analysis
@@ -38,6 +47,7 @@ def make_dance(
     target_cfg: TargetConfig | None = None,
     analysis: Analysis | Any | None = None,
     style: str = "mixed",
+    moves: MoveSet | None = None,
 ) -> tuple[Dance, Analysis | None]:
     """Make a dance from a song (built-in choreographer) or from a human motion file.
 
@@ -50,10 +60,17 @@ def make_dance(
         seed: choreographer seed.
         target_cfg: the other target settings; default `TargetConfig()`.
         analysis: a ready `quaddance.music.analysis.Analysis` of ``song``.
-        style: choreographer style, a key of `quaddance.choreo.choreographer.STYLES`.
+        style: choreographer style, a key of `quaddance.choreo.choreographer.STYLES` (or
+            of the ``moves`` file's styles).
+        moves: body moves and styles of a ``--moves`` file
+            (`quaddance.choreo.moves_file.load_moves`); None: the built-in ones.
 
     Returns:
         The `Dance` (curves at ``cfg.out_fps``) and the song's analysis (None without a song).
+        ``dance.body_targets`` are the trunk targets (the choreographer's body moves, or the
+        motion's pelvis, scaled by `fit_body`), made feasible by `feasible_body_targets` in
+        every mode. ``dance.clamp_report`` (not saved) says what was clamped:
+        ``{"paw": paw_clamp_report(...), "body": feasible_body_targets' report}``.
     """
     if song is None and motion is None and analysis is None:
         raise QuaddanceError("give a song, a motion file, or both")
@@ -69,15 +86,25 @@ def make_dance(
 
         human = load_motion(motion)
         feet_m, fps = np.asarray(human.feet_m, dtype=np.float64), float(human.fps)
+        # Motions without a trunk (or stand-ins that carry only feet) dance with a still body.
+        trunk = getattr(human, "body", None)
+        body = fit_body(trunk) if trunk is not None else np.zeros((feet_m.shape[0], 4))
         source = human.source if analysis is None else f"{human.source}; beats of {song_name}"
     else:
         grid = MusicGrid.from_analysis(analysis)
-        feet_m, fps = choreograph(grid, seed=seed, fps=CHOREO_FPS, style=style), CHOREO_FPS
+        feet_m = choreograph(grid, seed=seed, fps=CHOREO_FPS, style=style, moves=moves)
+        fps = CHOREO_FPS
+        body = choreograph_body(grid, feet_m, fps, seed=seed, style=style, moves=moves)
         source = f"choreographer (style {style}, seed {seed}) on {song_name}"
+        if moves is not None and moves.source != "built-in":
+            source += f", moves {moves.source}"
 
     beats_s = np.asarray(analysis.beats_s if analysis is not None else [], dtype=np.float64)
     downbeats_s = np.asarray(analysis.downbeats_s if analysis is not None else [], dtype=np.float64)
     time_s, targets_m = robot_targets(feet_m, fps, beats_s, cfg)
+    body_targets, body_report = feasible_body_targets(
+        body, fps, time_s, targets_m, min_lift_m=cfg.min_lift_m
+    )
     dance = Dance(
         fps=cfg.out_fps,
         time_s=time_s,
@@ -89,6 +116,11 @@ def make_dance(
         source=source,
         seed=int(seed),
         version=quaddance.__version__,
+        body_targets=body_targets,
+        clamp_report={
+            "paw": paw_clamp_report(feet_m, fps, targets_m, cfg),
+            "body": body_report,
+        },
     )
     return dance, analysis
 
@@ -99,6 +131,7 @@ def target_bank(
     seed: int = 0,
     cfg: TargetConfig | None = None,
     progress: Callable[[int], None] | None = None,
+    body: bool = False,
 ) -> np.ndarray:
     """``n`` robot target sequences from synthetic songs, for training without audio.
 
@@ -108,7 +141,9 @@ def target_bank(
 
     Returns:
         (n, T, 4) float32 foot-height targets (FL, FR, RL, RR), m, at ``cfg.out_fps``,
-        T = ceil(duration_s * out_fps).
+        T = ceil(duration_s * out_fps). With ``body=True``: (n, T, 8), the 4 foot targets
+        then the 4 feasible body targets (`quaddance.targets.BODY_COLUMNS`); the foot
+        targets are the same as with ``body=False``.
     """
     if n < 1:
         raise QuaddanceError(f"target bank size must be >= 1, got {n}")
@@ -116,7 +151,7 @@ def target_bank(
         raise QuaddanceError(f"target bank duration_s must be > 0, got {duration_s}")
     cfg = cfg or TargetConfig()
     n_out = int(np.ceil(duration_s * cfg.out_fps - 1e-9))
-    bank = np.zeros((n, n_out, 4), dtype=np.float32)
+    bank = np.zeros((n, n_out, 8 if body else 4), dtype=np.float32)
     rng = np.random.default_rng(seed)
     styles = sorted(STYLES)
     for i in range(n):
@@ -125,10 +160,17 @@ def target_bank(
         beats_per_bar = 3 if rng.random() < 0.1 else 4
         grid = synthetic_grid(tempo_bpm, duration_s, rng, swing=swing, beats_per_bar=beats_per_bar)
         style = styles[int(rng.integers(len(styles)))]
-        feet_m = choreograph(grid, seed=int(rng.integers(2**31)), fps=CHOREO_FPS, style=style)
-        _, targets_m = robot_targets(feet_m, CHOREO_FPS, grid.beats_s, cfg)
+        dance_seed = int(rng.integers(2**31))
+        feet_m = choreograph(grid, seed=dance_seed, fps=CHOREO_FPS, style=style)
+        time_s, targets_m = robot_targets(feet_m, CHOREO_FPS, grid.beats_s, cfg)
         m = min(n_out, targets_m.shape[0])
-        bank[i, :m] = targets_m[:m]
+        bank[i, :m, :4] = targets_m[:m]
+        if body:
+            trunk = choreograph_body(grid, feet_m, CHOREO_FPS, seed=dance_seed, style=style)
+            trunk, _ = feasible_body_targets(
+                trunk, CHOREO_FPS, time_s, targets_m, min_lift_m=cfg.min_lift_m
+            )
+            bank[i, :m, 4:] = trunk[:m]
         if progress is not None:
             progress(i)
     return bank

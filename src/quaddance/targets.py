@@ -15,13 +15,14 @@ This module must not import librosa or `quaddance.music`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
 from scipy.signal import find_peaks, peak_widths
 
-from quaddance.choreo.choreographer import MIN_JERK_PEAK_SPEED, LiftPlan, render_lifts
+from quaddance.choreo.choreographer import MIN_JERK_PEAK_SPEED, LiftPlan, min_jerk, render_lifts
 from quaddance.errors import QuaddanceError
 
 TargetMode = Literal["feasible", "paper", "minmax"]
@@ -337,3 +338,268 @@ def _fit_in_time(lifts: list[_Lift], cfg: TargetConfig, end_s: float) -> list[_L
             break
         kept.pop()
     return kept
+
+
+# --- body (trunk) targets ---------------------------------------------------------------------
+
+#: Columns of every body-target array (T, 4), relative to the standing pose.
+BODY_COLUMNS: tuple[str, ...] = ("height_offset_m", "roll_rad", "pitch_rad", "yaw_rad")
+#: Largest |height offset| a dance file may hold, m, and largest |angle|, rad (file checks).
+BODY_FILE_MAX_HEIGHT_M = 0.2
+BODY_FILE_MAX_ANGLE_RAD = 1.0
+
+
+@dataclass(frozen=True)
+class BodyLimits:
+    """The trunk pose range a Go1 holds while dancing, relative to standing.
+
+    ``height_offset_m`` is (lowest, highest), m; the angles are symmetric maxima, rad.
+    ``max_speed`` and ``max_accel`` are per column of `BODY_COLUMNS` (m/s or rad/s, and
+    m/s^2 or rad/s^2).
+    """
+
+    height_offset_m: tuple[float, float]
+    roll_rad: float
+    pitch_rad: float
+    yaw_rad: float
+    max_speed: tuple[float, float, float, float] = (0.25, 1.5, 1.5, 1.5)
+    max_accel: tuple[float, float, float, float] = (3.0, 20.0, 20.0, 20.0)
+
+    def __post_init__(self) -> None:
+        lo, hi = self.height_offset_m
+        values = [lo, hi, self.roll_rad, self.pitch_rad, self.yaw_rad]
+        values += list(self.max_speed) + list(self.max_accel)
+        if not all(np.isfinite(v) for v in values) or len(self.max_speed) != 4:
+            raise QuaddanceError("BodyLimits: every value must be finite, four speeds/accels")
+        if not lo <= 0.0 <= hi:
+            raise QuaddanceError(f"BodyLimits.height_offset_m must hold 0, got {(lo, hi)}")
+        if min(values[2:]) < 0 or min(list(self.max_speed) + list(self.max_accel)) <= 0:
+            raise QuaddanceError("BodyLimits: angles must be >= 0, speeds and accels > 0")
+
+    @property
+    def low(self) -> np.ndarray:
+        """(4,) lowest value per column."""
+        return np.array([self.height_offset_m[0], -self.roll_rad, -self.pitch_rad, -self.yaw_rad])
+
+    @property
+    def high(self) -> np.ndarray:
+        """(4,) highest value per column."""
+        return np.array([self.height_offset_m[1], self.roll_rad, self.pitch_rad, self.yaw_rad])
+
+
+# PROVISIONAL: estimates, not measured. To be replaced by the ranges that
+# `quaddance bench body-reach` measures in the simulator (four feet down / one paw up).
+#: Trunk range with all four feet on the ground.
+BODY_LIMITS_FOUR_FEET = BodyLimits(
+    height_offset_m=(-0.06, 0.03), roll_rad=0.25, pitch_rad=0.20, yaw_rad=0.25
+)
+#: Trunk range while a front paw target is above `TargetConfig.min_lift_m` (three legs carry
+#: the robot, so it leans and twists less).
+BODY_LIMITS_PAW_UP = BodyLimits(
+    height_offset_m=(-0.04, 0.02), roll_rad=0.12, pitch_rad=0.12, yaw_rad=0.15
+)
+#: Time over which the allowed range blends between the two sets, s (before a lift starts
+#: and after it ends), so the range edges never move faster than the trunk may.
+BODY_RANGE_BLEND_S = 0.3
+#: Share of the range that a human body curve's 98th percentile is scaled to (`fit_body`).
+BODY_FIT_SHARE = 0.9
+
+
+def fit_body(body: np.ndarray, limits: BodyLimits = BODY_LIMITS_FOUR_FEET) -> np.ndarray:
+    """Scale human-unit body curves (T, 4) into the robot's range, column by column.
+
+    Each column is multiplied by one gain <= 1 (never amplified), chosen so that its 98th
+    percentile of |value| fills `BODY_FIT_SHARE` of the four-feet range (height: of each
+    side, the tighter gain). One gain per column keeps the dance's dynamics: quiet stays
+    quieter than loud. What still sticks out is clamped by `feasible_body_targets`.
+    """
+    body = np.asarray(body, dtype=np.float64)
+    out = body.copy()
+    for c in range(4):
+        col = body[:, c]
+        gain = 1.0
+        for side, bound in ((col[col < 0], -limits.low[c]), (col[col > 0], limits.high[c])):
+            if side.size:
+                p = float(np.percentile(np.abs(side), 98.0))
+                if p > 0 and bound > 0:
+                    gain = min(gain, BODY_FIT_SHARE * bound / p)
+        out[:, c] = gain * col
+    return out
+
+
+def _paw_up_weight(time_s: np.ndarray, paw_targets_m: np.ndarray | None, min_lift_m: float):
+    """(T,) in [0, 1]: 1 where a front paw target is above ``min_lift_m``, blending to 0
+    over `BODY_RANGE_BLEND_S` on both sides with a minimum-jerk ramp (C2)."""
+    n = time_s.size
+    if paw_targets_m is None or n == 0:
+        return np.zeros(n)
+    up = np.asarray(paw_targets_m, dtype=np.float64)[:, :2].max(axis=1) > min_lift_m
+    if not up.any():
+        return np.zeros(n)
+    # Distance in time to the nearest paw-up sample, both directions.
+    up_t = time_s[up]
+    idx = np.clip(np.searchsorted(up_t, time_s), 1, up_t.size) - 1
+    nxt = np.clip(idx + 1, 0, up_t.size - 1)
+    dist = np.minimum(np.abs(time_s - up_t[idx]), np.abs(time_s - up_t[nxt]))
+    return 1.0 - min_jerk(np.clip(dist / BODY_RANGE_BLEND_S, 0.0, 1.0))
+
+
+def _stop_speed(gap: float, dt: float, a_max: float) -> float:
+    """Fastest speed towards a bound ``gap`` away that can still stop before it, braking at
+    ``a_max`` in steps of ``dt`` (solves v^2 / 2a + 2 v dt = gap; the 2 v dt covers the
+    step taken now and the discretisation of the stop)."""
+    if gap <= 0.0:
+        return 0.0
+    return a_max * (-2.0 * dt + math.sqrt(4.0 * dt * dt + 2.0 * gap / a_max))
+
+
+def _window_min(x: np.ndarray, width: int) -> np.ndarray:
+    """Minimum of ``x[k : k + width]`` for every k (the window is cut at the end)."""
+    padded = np.concatenate([x, np.full(width - 1, x[-1])]) if width > 1 else x
+    return np.lib.stride_tricks.sliding_window_view(padded, width).min(axis=1)
+
+
+def _rate_limit(
+    x: np.ndarray, low: np.ndarray, high: np.ndarray, dt: float, v_max: float, a_max: float
+) -> np.ndarray:
+    """One causal pass: follow ``x`` (T,) inside [low, high] with |velocity| <= v_max and
+    |acceleration| <= a_max (finite differences at ``dt``), feeding the target's own
+    velocity forward.
+
+    A target that keeps the bounds is reproduced exactly. Elsewhere the output closes the
+    gap as fast as the bounds allow and brakes in time, both for the target (velocity towards
+    it at most sqrt(2 a |gap|)) and for the range edges, which it looks at as far ahead as
+    a stop from full speed takes.
+    """
+    n = x.size
+    y = np.empty(n)
+    if n == 0:
+        return y
+    ahead = int(np.ceil(v_max / a_max / dt)) + 2
+    high_l = _window_min(high, ahead).tolist()
+    low_l = (-_window_min(-low, ahead)).tolist()
+    xs = x.tolist()
+    pos, vel = xs[0], 0.0
+    y[0] = pos
+    dv = a_max * dt
+    for k in range(1, n):
+        v_ff = (xs[k] - xs[k - 1]) / dt
+        gap = xs[k - 1] - pos
+        w = min(abs(gap) / dt, math.sqrt(2.0 * a_max * abs(gap)))
+        want = v_ff + (w if gap > 0 else -w)
+        up = _stop_speed(high_l[k] - pos, dt, a_max)
+        down = -_stop_speed(pos - low_l[k], dt, a_max)
+        want = min(max(want, down), up)
+        vel = min(max(want, vel - dv, -v_max), vel + dv, v_max)
+        pos += vel * dt
+        y[k] = pos
+    return y
+
+
+def _bounded_smooth(
+    x: np.ndarray, low: np.ndarray, high: np.ndarray, dt: float, v_max: float, a_max: float
+) -> np.ndarray:
+    """Forward-backward `_rate_limit`, averaged: no net lag, and within all bounds (the mean
+    of two curves that keep a range and a bound on velocity and acceleration keeps them)."""
+    # Already within the bounds (from rest to rest, as the passes start): nothing to do. The
+    # passes would give the same; this only saves their time (most choreographed columns).
+    vel = np.diff(x, prepend=x[:1], append=x[-1:]) / dt
+    if np.all(np.abs(vel) <= v_max) and np.all(np.abs(np.diff(vel)) <= a_max * dt):
+        return x.copy()
+    fwd = _rate_limit(x, low, high, dt, v_max, a_max)
+    bwd = _rate_limit(x[::-1], low[::-1], high[::-1], dt, v_max, a_max)[::-1]
+    return 0.5 * (fwd + bwd)
+
+
+def paw_clamp_report(
+    human_feet_m: np.ndarray, human_fps: float, targets_m: np.ndarray, cfg: TargetConfig
+) -> dict:
+    """What became of the human lifts in the robot's paw targets: counts of lifts (human
+    bumps of at least ``cfg.min_prominence_m``; robot peaks above ``cfg.min_lift_m``), how
+    many human lifts were above the scale reference (clipped to ``max_height_m``), and the
+    highest target, m."""
+    feet = np.asarray(human_feet_m, dtype=np.float64)
+    lifts, _, _ = _detect_lifts(feet, human_fps, cfg)
+    sizes = np.array([lift.height_m for lift in lifts])
+    robot = sum(
+        int(find_peaks(np.asarray(targets_m)[:, k], height=cfg.min_lift_m)[0].size) for k in (0, 1)
+    )
+    clipped = 0
+    if sizes.size and cfg.mode == "feasible":
+        clipped = int(np.count_nonzero(sizes > np.percentile(sizes, cfg.lift_percentile)))
+    return {
+        "mode": cfg.mode,
+        "human_lifts": int(sizes.size),
+        "robot_lifts": robot,
+        "dropped_or_merged": max(int(sizes.size) - robot, 0),
+        "clipped_to_max_height": clipped,
+        "max_height_m": float(cfg.max_height_m),
+        "highest_target_m": float(np.max(targets_m[:, :2], initial=0.0)),
+    }
+
+
+def feasible_body_targets(
+    body: np.ndarray,
+    fps_in: float,
+    time_s_out: np.ndarray,
+    paw_targets_m: np.ndarray | None = None,
+    four_feet: BodyLimits = BODY_LIMITS_FOUR_FEET,
+    paw_up: BodyLimits = BODY_LIMITS_PAW_UP,
+    min_lift_m: float = TargetConfig.min_lift_m,
+) -> tuple[np.ndarray, dict]:
+    """Body curves the robot can follow, at the paw targets' times.
+
+    Parameters:
+        body: (T_in, 4) body curves in robot units (see `fit_body`), columns `BODY_COLUMNS`,
+            sampled at ``fps_in`` Hz from t = 0.
+        time_s_out: (T,) output times, s (those of the paw targets).
+        paw_targets_m: (T, 4) paw targets at ``time_s_out``; where a front one is above
+            ``min_lift_m`` the ``paw_up`` range applies, blended over `BODY_RANGE_BLEND_S`.
+        four_feet, paw_up: the two ranges; speed and acceleration bounds come from the
+            tighter of the two.
+
+    Rules, in order: resample linearly; clamp each sample to the range at its time; limit
+    speed and acceleration (forward-backward, zero net lag) while staying inside the
+    range: the filter also brakes before the range edges, so the range holds too.
+
+    Returns:
+        body_out: (T, 4) float64.
+        report: per column name, ``{"clamped": samples changed by more than 1e-6,
+        "max": largest change, "mean": mean change over all samples}`` in the column's
+        units, and ``"samples"``: T.
+    """
+    body = np.asarray(body, dtype=np.float64)
+    t_out = np.asarray(time_s_out, dtype=np.float64)
+    if body.ndim != 2 or body.shape[1] != 4:
+        raise QuaddanceError(f"body targets must have shape (T, 4), got {body.shape}")
+    if not np.all(np.isfinite(body)):
+        raise QuaddanceError("body targets contain NaN or infinite values")
+    if not (np.isfinite(fps_in) and fps_in > 0):
+        raise QuaddanceError(f"body fps must be > 0, got {fps_in}")
+    n = t_out.size
+    empty = body.shape[0] == 0 or n == 0
+    wanted = np.zeros((n, 4)) if empty else resample(body, fps_in, t_out)
+    weight = _paw_up_weight(t_out, paw_targets_m, min_lift_m)[:, None]
+    low = (1 - weight) * four_feet.low + weight * paw_up.low
+    high = (1 - weight) * four_feet.high + weight * paw_up.high
+    v_max = np.minimum(four_feet.max_speed, paw_up.max_speed)
+    a_max = np.minimum(four_feet.max_accel, paw_up.max_accel)
+    dt = float(t_out[1] - t_out[0]) if n > 1 else 1.0
+
+    out = np.clip(wanted, low, high)
+    for c in range(4):
+        smooth = _bounded_smooth(
+            out[:, c], low[:, c], high[:, c], dt, float(v_max[c]), float(a_max[c])
+        )
+        # The filter brakes before the range edges; the clip only removes rounding.
+        out[:, c] = np.clip(smooth, low[:, c], high[:, c])
+
+    change = np.abs(out - wanted)
+    report: dict = {"samples": int(n)}
+    for c, name in enumerate(BODY_COLUMNS):
+        report[name] = {
+            "clamped": int(np.count_nonzero(change[:, c] > 1e-6)),
+            "max": float(change[:, c].max(initial=0.0)),
+            "mean": float(change[:, c].mean()) if n else 0.0,
+        }
+    return out, report

@@ -70,6 +70,10 @@ class TrainCfg:
     torch_threads: int | None = None
     learning_rate: float = 1e-3  # FACTS.md section 1
     entropy_coef: float = 0.01
+    # Start from another run's networks (its checkpoint.pt): inputs both tasks have keep
+    # their weights, new ones (say the body targets of --whole-body) start at zero weight,
+    # so the new policy begins as the old one and PPO learns what the new inputs add.
+    init_from: Path | None = None
     task: DanceTaskCfg = field(default_factory=DanceTaskCfg)
 
 
@@ -121,16 +125,65 @@ def build_bank(cfg: TrainCfg, progress=None) -> np.ndarray:
     from quaddance.pipeline import target_bank
 
     path = cfg.run_dir / "bank.npy"
+    width = 8 if cfg.task.whole_body else 4  # paw targets, then body targets
     if path.exists():
         bank = np.load(path, allow_pickle=False)
-        if bank.ndim == 3 and bank.shape[2] == 4:
+        if bank.ndim == 3 and bank.shape[2] == width:
             return bank
     bank = target_bank(
-        cfg.bank_size, cfg.bank_duration_s, seed=cfg.seed, cfg=_target_cfg(cfg), progress=progress
+        cfg.bank_size,
+        cfg.bank_duration_s,
+        seed=cfg.seed,
+        cfg=_target_cfg(cfg),
+        progress=progress,
+        body=cfg.task.whole_body,
     )
     with atomic_path(path) as tmp:
         np.save(tmp, bank)
     return bank
+
+
+def _column_names(history_len: int, n_preview: int, whole_body: bool) -> dict[str, list[str]]:
+    """One name per observation column, actor and critic (`sim.observations` layouts)."""
+    from quaddance.sim.observations import PRIVILEGED_TERMS, actor_terms
+
+    actor = [
+        f"{t['name']}[{i}]"
+        for t in actor_terms(history_len, n_preview, whole_body)
+        for i in range(t["size"])
+    ]
+    critic = actor + [f"{name}[{i}]" for name, size, _ in PRIVILEGED_TERMS for i in range(size)]
+    return {"actor": actor, "critic": critic}
+
+
+def _transplant(old: dict, new: dict, old_cols: list[str], new_cols: list[str]) -> dict:
+    """``new`` with ``old``'s weights: the first layer and the input normalizer column by
+    column where the names match (new columns: zero weight, mean 0, variance 1); the other
+    layers as they are (their shapes must match)."""
+    out = dict(new)
+    where = {name: i for i, name in enumerate(old_cols)}
+    pairs = [(j, where[name]) for j, name in enumerate(new_cols) if name in where]
+    if not pairs:
+        raise ValueError("no observation in common")
+    dst = torch.tensor([j for j, _ in pairs])
+    src = torch.tensor([i for _, i in pairs])
+    for key, value in old.items():
+        if key not in new:
+            raise ValueError(f"{key} is not in this network")
+        if key == "mlp.0.weight":
+            w = torch.zeros_like(new[key])
+            w[:, dst] = value[:, src]
+            out[key] = w
+        elif key.startswith("obs_normalizer._"):
+            fill = 0.0 if key.endswith("_mean") else 1.0
+            v = torch.full_like(new[key], fill)
+            v[:, dst] = value[:, src]
+            out[key] = v
+        else:
+            if value.shape != new[key].shape:
+                raise ValueError(f"{key}: shape {tuple(value.shape)} vs {tuple(new[key].shape)}")
+            out[key] = value.clone()
+    return out
 
 
 def _target_cfg(cfg: TrainCfg):
@@ -185,6 +238,8 @@ class Trainer:
         self.ckpt_path = cfg.run_dir / "checkpoint.pt"
         if cfg.resume:
             self._load(self.ckpt_path)
+        elif cfg.init_from is not None:
+            self._init_from(Path(cfg.init_from))
 
     # --- checkpoints -------------------------------------------------------------------------
     def save(self) -> None:
@@ -219,6 +274,37 @@ class Trainer:
                 path, f"not a usable checkpoint for this task ({type(err).__name__}: {err})"
             ) from err
         self.log(f"resumed {path} at iteration {self.iteration} ({self.env_steps:,} env steps)")
+
+    def _init_from(self, path: Path) -> None:
+        """Copy another run's actor and critic, input column by input column (by name)."""
+        if not path.is_file():
+            raise InputFileError(path, "no such checkpoint (--init-from)")
+        try:
+            state = torch.load(path, map_location=self.device, weights_only=True)
+            old = json.loads(state["config_json"])
+            old_task = old["task"]
+            old_names = _column_names(
+                old_task["obs"]["history_len"],
+                len(old_task["obs"]["preview_s"]),
+                bool(old_task.get("whole_body", False)),
+            )
+            ours = _column_names(
+                self.task_cfg.obs.history_len,
+                len(self.task_cfg.obs.preview_s),
+                self.task_cfg.whole_body,
+            )
+            new_state = self.alg.save()
+            for key, group in (("actor_state_dict", "actor"), ("critic_state_dict", "critic")):
+                new_state[key] = _transplant(
+                    state[key], new_state[key], old_names[group], ours[group]
+                )
+            self.alg.load(new_state, {"actor": True, "critic": True}, strict=True)
+        except (KeyError, ValueError, RuntimeError, json.JSONDecodeError) as err:
+            raise InputFileError(
+                path, f"cannot start from this checkpoint ({type(err).__name__}: {err})"
+            ) from err
+        shared = len(set(old_names["actor"]) & set(ours["actor"]))
+        self.log(f"started from {path}: {shared} of {len(ours['actor'])} actor inputs carried over")
 
     # --- learning ------------------------------------------------------------------------------
     def learn(self, iterations: int, progress: bool = True) -> list[dict]:

@@ -456,3 +456,37 @@ def guess_unit(leg_chain: float) -> tuple[str, float]:
         UNITS_M.items(),
         key=lambda item: abs(np.log(max(leg_chain, 1e-12) * item[1] / TYPICAL_LEG_CHAIN_M)),
     )
+
+
+_SPINE_PATTERN = re.compile(r"spine|chest|lowerback|back|torso|abdomen")
+
+
+def find_hips(parents: tuple[int, ...], ankles: tuple[int, int]) -> tuple[int, int] | None:
+    """The (left, right) hip joints: each ankle's grandparent (ankle <- knee <- hip), or
+    None when a leg is too short a chain or both reach the same joint."""
+    hips = []
+    for ankle in ankles:
+        knee = parents[ankle]
+        hip = parents[knee] if knee >= 0 else -1
+        if hip < 0:
+            return None
+        hips.append(hip)
+    return (hips[0], hips[1]) if hips[0] != hips[1] else None
+
+
+def find_spine(
+    joint_names: tuple[str, ...] | list[str], parents: tuple[int, ...], ankles: tuple[int, int]
+) -> int | None:
+    """A joint up the spine, for the trunk's up axis: the last joint named like a spine or
+    chest (the highest of them in a chain) that is not in a leg, or None."""
+    legs: set[int] = set()
+    for joint in ankles:
+        while joint > 0:
+            legs.add(joint)
+            joint = parents[joint]
+    found = [
+        j
+        for j, name in enumerate(joint_names)
+        if j > 0 and j not in legs and _SPINE_PATTERN.search(_normalised_name(name))
+    ]
+    return found[-1] if found else None

@@ -22,12 +22,15 @@ from __future__ import annotations
 
 import zlib
 from dataclasses import dataclass
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
 from quaddance.choreo.grid import MusicGrid
 from quaddance.errors import QuaddanceError
+
+if TYPE_CHECKING:
+    from quaddance.choreo.body import MoveSet
 
 #: Highest a human foot goes in this dance, m (a high knee lift of an adult).
 MAX_HEIGHT_M = 0.45
@@ -206,11 +209,18 @@ def _beat_time(beats_s: np.ndarray, pos: float) -> float:
     return float(beats_s[i] + (pos - i) * (beats_s[i + 1] - beats_s[i]))
 
 
-def plan_dance(grid: MusicGrid, seed: int = 0, style: str = "mixed") -> LiftPlan:
-    """Choose the moves for ``grid`` and return their lifts, timed and sized (see module)."""
-    if style not in STYLES:
+def plan_dance(
+    grid: MusicGrid,
+    seed: int = 0,
+    style: str = "mixed",
+    styles: dict[str, dict[str, float]] | None = None,
+) -> LiftPlan:
+    """Choose the moves for ``grid`` and return their lifts, timed and sized (see module).
+    ``styles`` replaces `STYLES` (a ``--moves`` file adds styles)."""
+    styles = STYLES if styles is None else styles
+    if style not in styles:
         raise QuaddanceError(
-            f"unknown choreography style {style!r}; choose one of {sorted(STYLES)}"
+            f"unknown choreography style {style!r}; choose one of {sorted(styles)}"
         )
     beats_s = grid.beats_s
     n_beats = beats_s.size
@@ -236,7 +246,7 @@ def plan_dance(grid: MusicGrid, seed: int = 0, style: str = "mixed") -> LiftPlan
 
     w_quiet = np.array([m.weight_quiet for m in MOVES])
     w_loud = np.array([m.weight_loud for m in MOVES])
-    w_style = np.array([STYLES[style].get(m.name, 1.0) for m in MOVES])
+    w_style = np.array([styles[style].get(m.name, 1.0) for m in MOVES])
     # Each section gets a signature move, drawn by the section's loudness.
     signature = []
     for e in section_e:
@@ -302,17 +312,28 @@ def _make_plausible(plan: LiftPlan, duration_s: float) -> LiftPlan:
 
 
 def choreograph(
-    grid: MusicGrid, seed: int = 0, fps: float = 60.0, style: str = "mixed"
+    grid: MusicGrid,
+    seed: int = 0,
+    fps: float = 60.0,
+    style: str = "mixed",
+    moves: MoveSet | None = None,
 ) -> np.ndarray:
     """Dance to ``grid``: human foot heights above the floor, m, shape (T, 2) = (left,
     right), sampled at ``fps`` Hz from t = 0, T = ceil(duration_s * fps).
 
     Deterministic for a given (grid, seed, style); another seed or another song gives
     another dance. ``style`` is a key of `STYLES`. Lifts peak on beats (or half beats in
-    double-time moves); at every frame at least one foot is on the floor.
+    double-time moves); at every frame at least one foot is on the floor. ``moves`` (a
+    ``--moves`` file, `quaddance.choreo.moves_file.load_moves`) may add styles. The trunk's
+    dance is `quaddance.choreo.body.choreograph_body`.
     """
     if not fps > 0:
         raise QuaddanceError(f"fps must be > 0, got {fps}")
     n_frames = int(np.ceil(grid.duration_s * fps - 1e-9))
     t_s = np.arange(n_frames) / fps
-    return render_lifts(t_s, plan_dance(grid, seed=seed, style=style))
+    styles = None
+    if moves is not None:
+        from quaddance.choreo.moves_file import paw_styles
+
+        styles = paw_styles(moves)
+    return render_lifts(t_s, plan_dance(grid, seed=seed, style=style, styles=styles))

@@ -16,6 +16,12 @@ anything else is an `InputFileError` naming the file and the field, in one short
 Pickles are read with `safe_load_pickle`, never plain pickle. The floor is estimated per
 sequence as a low percentile of both ankles' heights, so a foot's height is its ankle's
 height above its standing height (the foot's bottom, up to the sole thickness).
+
+The trunk becomes ``HumanMotion.body`` (T, 4) = `quaddance.targets.BODY_COLUMNS` in human
+units (`body_from_joints`): the pelvis height and the trunk's roll, pitch and yaw, from the
+hips (left-right axis) and the spine (up axis), each minus its moving average over
+`DRIFT_WINDOW_S` (so walking off, turning round and a crouched stance are not danced).
+Without two distinct hips the angles are zeros and only the height is kept.
 """
 
 from __future__ import annotations
@@ -27,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from quaddance.choreo import bvh, smpl
+from quaddance.choreo.grid import _moving_average
 from quaddance.choreo.safe_pickle import safe_load_pickle
 from quaddance.errors import InputFileError
 
@@ -45,6 +52,10 @@ MAX_POSITION_M = 1e4
 #: Largest axis-angle component, radians (real poses stay within a few turns).
 MAX_ANGLE_RAD = 1e3
 _MAX_MESSAGE_LIST = 120  # characters of a key or joint list quoted in an error
+
+#: Window of the moving average removed from the trunk curves (drift), s: a few bars, so
+#: the moves of a beat or two stay and slow wandering goes.
+DRIFT_WINDOW_S = 4.0
 
 _PICKLE_SUFFIXES = (".pkl", ".pickle")
 _BVH_SUFFIXES = (".bvh",)
@@ -78,11 +89,19 @@ class HumanMotion:
         Height of the (left, right) foot above the floor, metres, >= 0.
     source : str
         Where the curves came from, for logs and plots (file name and format).
+    body : np.ndarray, shape (T, 4)
+        Trunk height offset (m) and roll, pitch, yaw (rad), drift removed, human units
+        (`body_from_joints`); zeros where the file gives no trunk.
     """
 
     fps: float
     feet_m: np.ndarray = field(repr=False)
     source: str
+    body: np.ndarray | None = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        if self.body is None:
+            self.body = np.zeros((self.feet_m.shape[0], 4))
 
     @property
     def duration_s(self) -> float:
@@ -107,6 +126,64 @@ def feet_above_floor(ankle_heights: np.ndarray, floor_percentile: float) -> np.n
     """
     floor = np.percentile(ankle_heights, floor_percentile)
     return np.clip(ankle_heights - floor, 0.0, None)
+
+
+def _z_up(positions: np.ndarray, axis: int, sign: float) -> np.ndarray:
+    """Positions (..., 3) re-expressed in a right-handed frame whose z is ``sign * axis``."""
+    z = np.zeros(3)
+    z[axis] = sign
+    x = np.zeros(3)
+    x[(axis + 1) % 3] = 1.0
+    y = np.cross(z, x)
+    return positions @ np.stack([x, y, z], axis=1)
+
+
+def body_from_joints(
+    positions: np.ndarray,
+    up: tuple[int, float],
+    pelvis: int,
+    hips: tuple[int, int] | None,
+    spine: int | None,
+    fps: float,
+    metres_per_unit: float = 1.0,
+) -> np.ndarray:
+    """Trunk curves of a human, (T, 4) = height offset m, roll, pitch, yaw rad, drift removed.
+
+    Parameters
+    ----------
+    positions : (T, J, 3) world joint positions, file units.
+    up : (axis, sign) of the world's up direction.
+    pelvis : index of the pelvis / root joint (its height is the trunk height).
+    hips : (left, right) hip joints, or None: then the angles are 0.
+    spine : a joint up the spine (the trunk's up axis), or None: world up (pitch 0).
+    fps : frame rate, Hz (for the drift window).
+
+    Angles are ZYX (yaw, pitch, roll) of the frame (forward, left, up) built from the hips
+    and spine: roll > 0 tilts the trunk to the right, pitch > 0 bends it forward, yaw > 0
+    turns it left. Each column is minus its moving average over `DRIFT_WINDOW_S`.
+    """
+    p = _z_up(np.asarray(positions, dtype=np.float64), *up) * metres_per_unit
+    n = p.shape[0]
+    body = np.zeros((n, 4))
+    body[:, 0] = p[:, pelvis, 2]
+    if hips is not None:
+        left = p[:, hips[0]] - p[:, hips[1]]
+        width = np.linalg.norm(left, axis=1)
+        if np.median(width) > 1e-3:  # two distinct hips, at least a millimetre apart
+            trunk_up = p[:, spine] - p[:, pelvis] if spine is not None else np.array([0, 0, 1.0])
+            trunk_up = np.broadcast_to(trunk_up, left.shape)
+            fwd = np.cross(left, trunk_up)
+            fwd /= np.maximum(np.linalg.norm(fwd, axis=1, keepdims=True), 1e-12)
+            up_v = np.cross(fwd, left)
+            up_v /= np.maximum(np.linalg.norm(up_v, axis=1, keepdims=True), 1e-12)
+            left_v = np.cross(up_v, fwd)
+            body[:, 1] = np.arctan2(left_v[:, 2], up_v[:, 2])
+            body[:, 2] = np.arcsin(np.clip(-fwd[:, 2], -1.0, 1.0))
+            body[:, 3] = np.unwrap(np.arctan2(fwd[:, 1], fwd[:, 0]))
+    window = max(1, round(DRIFT_WINDOW_S * fps))
+    for c in range(4):
+        body[:, c] -= _moving_average(body[:, c], window)
+    return body
 
 
 def up_axis_of(positions: np.ndarray, root: int, ankles: tuple[int, int]) -> tuple[int, float]:
@@ -261,8 +338,15 @@ def _check_length(path: Path, n_frames: int, fps: float, cfg: MotionImportConfig
         )
 
 
-def _motion_from_pickle(path: Path, cfg: MotionImportConfig) -> tuple[float, np.ndarray, str]:
-    """(fps, ankle heights (T, 2) in metres with any origin, description) from a pickle."""
+_SMPL_HIPS = (1, 2)  # left, right hip joints of SMPL
+_SMPL_SPINE = 9  # spine3, the top of the lower back
+
+
+def _motion_from_pickle(
+    path: Path, cfg: MotionImportConfig
+) -> tuple[float, np.ndarray, str, np.ndarray]:
+    """(fps, ankle heights (T, 2) in metres with any origin, description, body (T, 4))
+    from a pickle."""
     data = safe_load_pickle(path)
     if not isinstance(data, dict):
         raise InputFileError(
@@ -277,7 +361,8 @@ def _motion_from_pickle(path: Path, cfg: MotionImportConfig) -> tuple[float, np.
         joints = _array(path, data, "full_pose", (None, smpl.N_JOINTS, 3), MAX_POSITION_M)
         _check_length(path, joints.shape[0], fps, cfg)
         heights = joints[:, [smpl.LEFT_ANKLE, smpl.RIGHT_ANKLE], cfg.edge_up_axis]
-        return fps, heights, f"EDGE full_pose, {_AXIS_NAMES[cfg.edge_up_axis]}-up"
+        body = _smpl_body(joints, (cfg.edge_up_axis, 1.0), fps)
+        return fps, heights, f"EDGE full_pose, {_AXIS_NAMES[cfg.edge_up_axis]}-up", body
     if "smpl_poses" not in data or "smpl_trans" not in data:
         keys = _listing(sorted(map(str, data)))
         raise InputFileError(
@@ -295,15 +380,24 @@ def _motion_from_pickle(path: Path, cfg: MotionImportConfig) -> tuple[float, np.
     ankles = (smpl.LEFT_ANKLE, smpl.RIGHT_ANKLE)
     if aist:
         heights = joints[:, list(ankles), cfg.aist_up_axis]
-        return fps, heights, f"AIST++ SMPL, {_AXIS_NAMES[cfg.aist_up_axis]}-up"
+        body = _smpl_body(joints, (cfg.aist_up_axis, 1.0), fps)
+        return fps, heights, f"AIST++ SMPL, {_AXIS_NAMES[cfg.aist_up_axis]}-up", body
     # EDGE parameters without full_pose: the global orientation decides the up axis.
     axis, sign = up_axis_of(joints, smpl.PELVIS, ankles)
     heights = sign * joints[:, list(ankles), axis]
-    return fps, heights, f"EDGE SMPL parameters, {_AXIS_NAMES[axis]}-up (detected)"
+    body = _smpl_body(joints, (axis, sign), fps)
+    return fps, heights, f"EDGE SMPL parameters, {_AXIS_NAMES[axis]}-up (detected)", body
 
 
-def _motion_from_bvh(path: Path, cfg: MotionImportConfig) -> tuple[float, np.ndarray, str]:
-    """(fps, ankle heights (T, 2) in metres with any origin, description) from a BVH file."""
+def _smpl_body(joints: np.ndarray, up: tuple[int, float], fps: float) -> np.ndarray:
+    return body_from_joints(joints, up, smpl.PELVIS, _SMPL_HIPS, _SMPL_SPINE, fps)
+
+
+def _motion_from_bvh(
+    path: Path, cfg: MotionImportConfig
+) -> tuple[float, np.ndarray, str, np.ndarray]:
+    """(fps, ankle heights (T, 2) in metres with any origin, description, body (T, 4)) from
+    a BVH file."""
     motion = bvh.load_bvh(path, cfg.max_duration_s, MAX_MOTION_FRAMES)
     _check_length(path, motion.positions.shape[0], motion.fps, cfg)
     ankles = bvh.find_ankles(motion.joint_names)
@@ -321,7 +415,17 @@ def _motion_from_bvh(path: Path, cfg: MotionImportConfig) -> tuple[float, np.nda
     heights = sign * metres_per_unit * motion.positions[:, list(ankles), axis]
     names = "/".join(motion.joint_names[a] for a in ankles)
     sign_text = "" if sign > 0 else "-"
-    return motion.fps, heights, f"BVH, {unit}, {sign_text}{_AXIS_NAMES[axis]}-up, ankles {names}"
+    body = body_from_joints(
+        motion.positions,
+        (axis, sign),
+        0,
+        bvh.find_hips(motion.parents, ankles),
+        bvh.find_spine(motion.joint_names, motion.parents, ankles),
+        motion.fps,
+        metres_per_unit,
+    )
+    description = f"BVH, {unit}, {sign_text}{_AXIS_NAMES[axis]}-up, ankles {names}"
+    return motion.fps, heights, description, body
 
 
 def _sniff(path: Path) -> str | None:
@@ -353,7 +457,7 @@ def load_motion(path: str | Path, cfg: MotionImportConfig | None = None) -> Huma
     -------
     HumanMotion
         ``feet_m`` (T, 2): (left, right) ankle height above the estimated floor, metres, at
-        the file's frame rate.
+        the file's frame rate; ``body`` (T, 4): the trunk (`body_from_joints`).
 
     Raises
     ------
@@ -373,9 +477,9 @@ def load_motion(path: str | Path, cfg: MotionImportConfig | None = None) -> Huma
     else:
         kind = _sniff(path)
     if kind == "pickle":
-        fps, heights, description = _motion_from_pickle(path, cfg)
+        fps, heights, description, body = _motion_from_pickle(path, cfg)
     elif kind == "bvh":
-        fps, heights, description = _motion_from_bvh(path, cfg)
+        fps, heights, description, body = _motion_from_bvh(path, cfg)
     else:
         raise InputFileError(
             path,
@@ -386,4 +490,8 @@ def load_motion(path: str | Path, cfg: MotionImportConfig | None = None) -> Huma
     if not np.all(np.isfinite(heights)) or np.max(np.abs(heights)) > MAX_POSITION_M:
         raise InputFileError(path, f"foot heights are not finite or beyond {MAX_POSITION_M:g} m")
     feet_m = feet_above_floor(heights, cfg.floor_percentile)
-    return HumanMotion(fps=fps, feet_m=feet_m, source=f"{path.name} ({description}, {fps:g} fps)")
+    # Angles are bounded by construction; a height drift-removed from bounded positions too.
+    body = np.where(np.isfinite(body), body, 0.0)
+    return HumanMotion(
+        fps=fps, feet_m=feet_m, source=f"{path.name} ({description}, {fps:g} fps)", body=body
+    )

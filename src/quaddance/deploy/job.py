@@ -92,7 +92,7 @@ def run_deploy(job: DeployJob, status: Callable[[str], None] = lambda m: None) -
             raise InputFileError(path, "no such file")
     policy = OnnxPolicy.load(job.policy or shipped_policy_path())
     out = ensure_dir(job.out_dir)
-    for name in ("deploy.json", "log.npz"):
+    for name in ("deploy.json", "log.npz", "rollout.npz"):
         check_output_file(out / name)  # refuse a FIFO or a folder before the robot moves
 
     with tempfile.TemporaryDirectory(prefix="quaddance-deploy-") as tmp:
@@ -129,7 +129,14 @@ def run_deploy(job: DeployJob, status: Callable[[str], None] = lambda m: None) -
         options = DeployOptions(
             seconds=job.seconds, auto_start=job.auto_start, inject=job.inject, song=song
         )
-        runner = Runner(make_robot(job), policy, dance.targets_m, options, status=status)
+        runner = Runner(
+            make_robot(job),
+            policy,
+            dance.targets_m,
+            options,
+            status=status,
+            body_targets=dance.body_targets,
+        )
         result = runner.run()
-    paths = write_outputs(out, result)
+    paths = write_outputs(out, result, policy, dance.beats_s)
     return result.summary, paths

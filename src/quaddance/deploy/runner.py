@@ -28,6 +28,7 @@ from quaddance.deploy.safety import STATES, Safety, SafetyCfg, go1_joint_range_r
 from quaddance.errors import QuaddanceError
 from quaddance.play.policy import OnnxPolicy
 from quaddance.sim import go1
+from quaddance.sim.body import BodyFeedforward
 from quaddance.sim.feedforward import FrontLiftFeedforward
 from quaddance.sim.kinematics import foot_pos_b
 from quaddance.sim.observations import ActorObservation, Measurement
@@ -47,14 +48,25 @@ class DanceController:
     law), fed with the policy JSON's nominal pose, action scale and feed-forward table.
     """
 
-    def __init__(self, policy: OnnxPolicy, targets_m: np.ndarray) -> None:
+    def __init__(
+        self, policy: OnnxPolicy, targets_m: np.ndarray, body_targets: np.ndarray | None = None
+    ) -> None:
         cfg = policy.task
         self.policy = policy
         self.cfg = cfg
         self.dev = torch.device("cpu")
-        self.targets = torch.as_tensor(np.asarray(targets_m), dtype=torch.float32)
-        if self.targets.ndim != 2 or self.targets.shape[1] != 4 or self.targets.shape[0] < 1:
-            raise QuaddanceError(f"dance targets must be (T, 4), got {tuple(self.targets.shape)}")
+        paws = torch.as_tensor(np.asarray(targets_m), dtype=torch.float32)
+        if paws.ndim != 2 or paws.shape[1] != 4 or paws.shape[0] < 1:
+            raise QuaddanceError(f"dance targets must be (T, 4), got {tuple(paws.shape)}")
+        body = torch.zeros(paws.shape[0], 4)
+        if body_targets is not None:
+            body = torch.as_tensor(np.asarray(body_targets), dtype=torch.float32)
+            if body.shape != paws.shape:
+                raise QuaddanceError(
+                    f"body targets must be (T, 4) like the paw targets {tuple(paws.shape)}, "
+                    f"got {tuple(body.shape)}"
+                )
+        self.rows = torch.cat([paws, body], dim=1)  # (T, 8): paw targets, then body targets
         self.actor_obs = ActorObservation(cfg, 1, self.dev)
         spec = policy.spec  # the policy's JSON contract
         self.nominal_joint_pos = torch.tensor(spec.nominal_joint_pos_rad, dtype=torch.float32)
@@ -65,6 +77,7 @@ class DanceController:
             if cfg.front_feedforward and ff is not None
             else None
         )
+        self.body_feedforward = BodyFeedforward(cfg.scene, self.dev) if cfg.whole_body else None
         self.step = 0  # dance step (policy ticks since dance time 0)
         self._fade: tuple[torch.Tensor, int, int] | None = None
         self.last_action = torch.zeros(1, go1.NUM_JOINTS)
@@ -72,21 +85,39 @@ class DanceController:
 
     @property
     def n_steps(self) -> int:
-        return int(self.targets.shape[0])
+        return int(self.rows.shape[0])
 
-    def targets_at(self, ahead_steps: int) -> torch.Tensor:
-        """(1, 4) targets ``ahead_steps`` ticks from the current step (held at the end; faded
-        to 0 after `fade_out`)."""
+    def extend(self, targets_m: np.ndarray, body_targets: np.ndarray) -> None:
+        """Append (K, 4) paw and (K, 4) body targets: a dance made while it is danced."""
+        more = torch.cat(
+            [
+                torch.as_tensor(np.asarray(targets_m), dtype=torch.float32).reshape(-1, 4),
+                torch.as_tensor(np.asarray(body_targets), dtype=torch.float32).reshape(-1, 4),
+            ],
+            dim=1,
+        )
+        self.rows = torch.cat([self.rows, more], dim=0)
+
+    def _row(self, ahead_steps: int) -> torch.Tensor:
         k = self.step + ahead_steps
         if self._fade is not None:
             row, first, n = self._fade
             return row * max(0.0, 1.0 - (k - first) / n)
-        return self.targets[min(k, self.n_steps - 1)][None]
+        return self.rows[min(k, self.n_steps - 1)][None]
+
+    def targets_at(self, ahead_steps: int) -> torch.Tensor:
+        """(1, 4) paw targets ``ahead_steps`` ticks from the current step (held at the end;
+        faded to 0 after `fade_out`)."""
+        return self._row(ahead_steps)[:, :4]
+
+    def body_targets_at(self, ahead_steps: int) -> torch.Tensor:
+        """(1, 4) body targets, as `targets_at`."""
+        return self._row(ahead_steps)[:, 4:]
 
     def fade_out(self, steps: int) -> None:
         """From the current step on, targets go linearly from their value now to 0 (all
-        feet down) over ``steps`` ticks."""
-        self._fade = (self.targets_at(0).clone(), self.step, max(1, steps))
+        feet down, trunk at the standing pose) over ``steps`` ticks."""
+        self._fade = (self._row(0).clone(), self.step, max(1, steps))
 
     @staticmethod
     def measurement(reading: Reading) -> Measurement:
@@ -110,7 +141,7 @@ class DanceController:
         """(proprio frame, observation (1, D)) at dance step ``step``."""
         self.step = step
         prop = self.actor_obs.proprio(self.measurement(reading), self.last_action)
-        return prop, self.actor_obs.build(prop, self.targets_at)
+        return prop, self.actor_obs.build(prop, self.targets_at, self.body_targets_at)
 
     def commit(self, prop: torch.Tensor, action: torch.Tensor) -> None:
         """The frame just seen joins the history; ``action`` is what the robot now does."""
@@ -119,7 +150,13 @@ class DanceController:
 
     def joint_targets(self, action: torch.Tensor) -> torch.Tensor:
         return joint_targets(
-            action, self.nominal_joint_pos, self.action_scale, self.feedforward, self.targets_at
+            action,
+            self.nominal_joint_pos,
+            self.action_scale,
+            self.feedforward,
+            self.targets_at,
+            self.body_feedforward,
+            self.body_targets_at,
         )
 
 
@@ -231,6 +268,8 @@ class _Tick:
     action: np.ndarray = field(default_factory=lambda: np.full(go1.NUM_JOINTS, np.nan))
     feet: np.ndarray = field(default_factory=lambda: np.full(4, np.nan))
     targets: np.ndarray = field(default_factory=lambda: np.full(4, np.nan))
+    body_targets: np.ndarray = field(default_factory=lambda: np.full(4, np.nan))
+    trunk_m: float = math.nan  #: trunk height above the lowest foot, kinematic estimate
     held: bool = False
     infer_s: float = math.nan
 
@@ -245,15 +284,25 @@ class Runner:
         targets_m: np.ndarray,
         options: DeployOptions,
         status: Callable[[str], None] = lambda msg: None,
+        body_targets: np.ndarray | None = None,
+        feeder: Callable[[float], None] | None = None,
+        on_tick: Callable[[_Tick], None] | None = None,
+        dance_s: float | None = None,
     ) -> None:
+        """``feeder(t_dance)`` runs at each dance tick before the policy (a live dance
+        extends ``self.ctrl``'s targets there); ``on_tick(tick)`` after each
+        command is sent (NaN before the dance); ``dance_s`` sets the dance's length instead
+        of the targets' (a dance made while it is danced)."""
         self.robot = robot
+        self.feeder = feeder
+        self.on_tick = on_tick
         self.policy = policy
         self.opt = options
         self.status = status
-        self.ctrl = DanceController(policy, targets_m)
+        self.ctrl = DanceController(policy, targets_m, body_targets)
         cfg = policy.task
         self.tick_s = 1.0 / cfg.policy_hz
-        n = self.ctrl.n_steps
+        n = self.ctrl.n_steps if dance_s is None else max(1, round(dance_s * cfg.policy_hz))
         if options.seconds is not None:
             n = min(n, max(1, round(options.seconds * cfg.policy_hz)))
         self.dance_steps = n
@@ -349,6 +398,7 @@ class Runner:
                 if sf.state != "damp" and r.is_finite():
                     last_reading = r
                     last_gravity, tick.feet, trunk_m = self._posture(r)
+                    tick.trunk_m = trunk_m
                     why = sf.check_posture(last_gravity, trunk_m)
                     if why is not None and self._posture_matters(now):
                         sf.damp(why, now)
@@ -372,6 +422,8 @@ class Runner:
                     cmd = sf.damping_command(r.joint_pos_rad)
                 self.robot.send(cmd)
                 self.last_cmd = cmd
+                if self.on_tick is not None:
+                    self.on_tick(tick)
                 work_ms = (time.monotonic() - now) * 1e3
                 new = reading is not None and reading.seq != last_seq
                 last_seq = r.seq
@@ -455,6 +507,8 @@ class Runner:
             return
         if step > 0 and step % round(PROGRESS_S / dt) == 0:
             self.status(f"dance {step * dt:.0f} / {self.dance_steps * dt:.0f} s")
+        if self.feeder is not None:
+            self.feeder(t)
         self._policy_step(tick, step)
 
     def _policy_step(self, tick: _Tick, step: int) -> None:
@@ -462,6 +516,7 @@ class Runner:
         sf, now = self.safety, tick.now
         prop, obs = self.ctrl.observe(tick.reading, step)
         tick.targets = self.ctrl.targets_at(0)[0].numpy()
+        tick.body_targets = self.ctrl.body_targets_at(0)[0].numpy()
         if not torch.isfinite(obs).all():
             sf.damp("NaN/Inf in the observation", now)
             return
@@ -533,6 +588,8 @@ class Runner:
             log["feet_true_m"] = truth["feet_m"][idx]
             log["base_height_true_m"] = truth["base_height_m"][idx]
             log["tilt_true_rad"] = truth["tilt_rad"][idx]
+            if "rpy_rad" in truth:
+                log["rpy_true_rad"] = truth["rpy_rad"][idx]
             # How far the simulated robot's physics ran behind the wall clock (machine load).
             self.sim_late_ms = _pcts(truth["late_s"] * 1e3)
             feet, feet_source = log["feet_true_m"], "simulator truth"
@@ -612,6 +669,8 @@ _LOG_KEYS = (
     "feet_est_m",
     "action",
     "targets_m",
+    "body_targets",
+    "trunk_est_m",
     "held",
     "inference_ms",
     "tick_ms",
@@ -648,6 +707,8 @@ def _append(
         "feet_est_m": tick.feet,
         "action": tick.action,
         "targets_m": tick.targets,
+        "body_targets": tick.body_targets,
+        "trunk_est_m": tick.trunk_m,
         "held": tick.held,
         "inference_ms": tick.infer_s * 1e3,
         "tick_ms": work_ms,
@@ -668,13 +729,62 @@ def _pcts(values: np.ndarray) -> dict:
     }
 
 
-def write_outputs(out_dir: Path, result: DeployResult) -> dict[str, Path]:
-    """deploy.json and log.npz, each written atomically."""
+def rollout_from_log(log: dict[str, np.ndarray], policy_hz: float):
+    """The dancing ticks of a run as a `play.rollout.RolloutResult` (time = dance time), so
+    `deploy` and `live` write the rollout.npz that `dance` writes. The robot's pose is the
+    simulator's truth where there is one, else the robot's own estimate (kinematics + IMU;
+    yaw unknown: 0)."""
+    from quaddance.play.rollout import RolloutResult
+
+    dancing = log["state"] == STATES.index("dance")
+    t = log["t_s"][dancing]
+    feet = log.get("feet_true_m", log["feet_est_m"])[dancing]
+    height = log.get("base_height_true_m", log["trunk_est_m"])[dancing]
+    if "rpy_true_rad" in log:
+        rpy = log["rpy_true_rad"][dancing]
+    else:
+        g = log["gravity"][dancing]
+        rpy = np.column_stack(
+            [np.arctan2(-g[:, 1], -g[:, 2]), np.arcsin(np.clip(g[:, 0], -1, 1)), 0 * g[:, 0]]
+        )
+    return RolloutResult(
+        fps=policy_hz,
+        time_s=t,
+        qpos=np.zeros((t.size, 0)),
+        feet_m=feet,
+        targets_m=log["targets_m"][dancing],
+        falls_s=[],
+        sim_wall_s=float("nan"),
+        base_height_m=height,
+        base_rpy_rad=rpy,
+        body_targets=log["body_targets"][dancing],
+    )
+
+
+def write_outputs(
+    out_dir: Path,
+    result: DeployResult,
+    policy: OnnxPolicy | None = None,
+    beats_s: np.ndarray | None = None,
+) -> dict[str, Path]:
+    """deploy.json and log.npz, and (given the policy) rollout.npz with the trunk's tracking
+    and beat coverage in deploy.json; each written atomically."""
     from quaddance.fileio import atomic_path, ensure_dir, write_json
 
     out = ensure_dir(out_dir)
     paths = {"summary": out / "deploy.json", "log": out / "log.npz"}
     with atomic_path(paths["log"]) as tmp:
         np.savez_compressed(tmp, **result.log)
+    if policy is not None and "t_s" in result.log:
+        from quaddance.play.dance import whole_body_metrics
+        from quaddance.play.rollout import save_rollout
+
+        beats = np.zeros(0) if beats_s is None else np.asarray(beats_s, dtype=float)
+        rollout = rollout_from_log(result.log, policy.task.policy_hz)
+        if rollout.time_s.size >= 2:
+            paths["rollout"] = out / "rollout.npz"
+            save_rollout(paths["rollout"], rollout, beats)
+            standing_m = policy.task.rewards.base_height_target_m
+            result.summary.update(whole_body_metrics(rollout, beats, standing_m))
     write_json(paths["summary"], result.summary)
     return paths

@@ -151,6 +151,7 @@ class _SimProcess:
             "feet_m": np.zeros((cap, 4)),
             "base_height_m": np.zeros(cap),
             "tilt_rad": np.zeros(cap),
+            "rpy_rad": np.zeros((cap, 3)),
             "trunk_contact": np.zeros(cap, bool),
             "tau_nm": np.zeros((cap, n)),
         }
@@ -246,6 +247,12 @@ class _SimProcess:
         t["base_height_m"][i] = d.qpos[2]
         up_z = 1 - 2 * (d.qpos[4] ** 2 + d.qpos[5] ** 2)  # world z of the trunk's z axis
         t["tilt_rad"][i] = np.arccos(np.clip(up_z, -1.0, 1.0))
+        w, x, y, z = d.qpos[3:7]
+        t["rpy_rad"][i] = (
+            np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y)),
+            np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0)),
+            np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)),
+        )
         t["trunk_contact"][i] = trunk_contact
         t["tau_nm"][i] = self.tau
         self.n_truth += 1

@@ -40,6 +40,8 @@ class DanceJob:
     width: int = 640
     height: int = 480
     target_markers: bool = True
+    style: str = "mixed"  # choreography style
+    moves: Path | None = None  # a --moves TOML file of extra body moves and styles
 
 
 @dataclass
@@ -48,6 +50,22 @@ class DanceOutputs:
     metrics: dict[str, Any]
     paths: dict[str, Path] = field(default_factory=dict)
     timings_s: dict[str, float] = field(default_factory=dict)
+
+
+def whole_body_metrics(result, beats_s, standing_height_m: float) -> dict[str, Any]:
+    """metrics.json's ``body`` (trunk tracking, `play.metrics.body_metrics`) and
+    ``beat_coverage`` (fraction of beats with a motion accent of the robot, paws or trunk, as
+    measured in the simulator, within +-100 ms). `dance`, `deploy` and `live` all use it."""
+    from quaddance.choreo.accents import beat_coverage, motion_accents_s
+    from quaddance.play.metrics import body_metrics
+
+    measured = result.body_measured(standing_height_m)
+    accents = motion_accents_s(result.time_s, result.feet_m, measured)
+    return {
+        "body": body_metrics(result.body_targets, measured),
+        # None without music beats (a motion file alone): nothing to cover.
+        "beat_coverage": beat_coverage(accents, beats_s) if len(beats_s) else None,
+    }
 
 
 def target_config_for(policy: OnnxPolicy, mode: str):
@@ -91,15 +109,20 @@ def _run_dance(
     from quaddance.play.metrics import dance_metrics
     from quaddance.play.plots import plot_feet
     from quaddance.play.policy import OnnxPolicy, shipped_policy_path
-    from quaddance.play.rollout import rollout
+    from quaddance.play.rollout import rollout, save_rollout
 
     for path in (job.song, job.motion):
         if path is not None and not Path(path).is_file():
             raise InputFileError(path, "no such file")
+    move_set = None
+    if job.moves is not None:
+        from quaddance.choreo.moves_file import load_moves
+
+        move_set = load_moves(job.moves)  # a bad file fails before any work
     policy_path = job.policy or shipped_policy_path()
     policy = OnnxPolicy.load(policy_path)
     out = ensure_dir(job.out_dir)
-    for name in ("dance.npz", "feet.png", "metrics.json", "dance.mp4"):
+    for name in ("dance.npz", "rollout.npz", "feet.png", "metrics.json", "dance.mp4"):
         check_output_file(out / name)  # refuse a FIFO or device before the work, not after
     timings: dict[str, float] = {}
 
@@ -111,6 +134,8 @@ def _run_dance(
         mode=job.mode,
         seed=job.seed,
         target_cfg=target_config_for(policy, job.mode),
+        style=job.style,
+        moves=move_set,
     )
     timings["choreography_s"] = time.perf_counter() - t0
     paths = {"dance": out / "dance.npz"}
@@ -147,12 +172,22 @@ def _run_dance(
         on_pose=on_pose,
     )
     timings["simulation_s"] = result.sim_wall_s
+    paths["rollout"] = out / "rollout.npz"
+    save_rollout(paths["rollout"], result, dance.beats_s)
     render = stream.finish() if stream is not None else None
 
     t0 = time.perf_counter()
     title = f"{Path(dance.source).name} - {policy_path.name}"
+    measured = result.body_measured(policy.task.rewards.base_height_target_m)
     paths["plot"] = plot_feet(
-        out / "feet.png", result.time_s, result.targets_m, result.feet_m, dance.beats_s, title
+        out / "feet.png",
+        result.time_s,
+        result.targets_m,
+        result.feet_m,
+        dance.beats_s,
+        title,
+        body_targets=result.body_targets,
+        body_measured=measured,
     )
     timings["plot_s"] = time.perf_counter() - t0
     render_s = None
@@ -175,6 +210,11 @@ def _run_dance(
         render_time_s=render_s,
         feasible_max_m=target_config_for(policy, "feasible").max_height_m,
     )
+    metrics.update(
+        whole_body_metrics(result, dance.beats_s, policy.task.rewards.base_height_target_m)
+    )
+    if dance.clamp_report is not None:
+        metrics["clamped"] = dance.clamp_report
     timings["total_s"] = time.perf_counter() - t_start
     metrics["source"] = dance.source
     metrics["policy"] = str(policy_path)

@@ -172,7 +172,23 @@ def summarize(rows: Sequence[dict[str, Any]]) -> dict[str, float | None]:
         "rear_lift_max_m": max((r["rear_lift_max_m"] or 0.0) for r in rows),
         "bas": mean([r["bas"] for r in rows]),
         "realtime_factor_sim": mean([r["realtime_factor_sim"] for r in rows]),
+        "body_height_mae_m": mean([_body(r, "height", "mae_m") for r in rows]),
+        "body_angle_mae_deg": mean([(r.get("body") or {}).get("angle_mae_deg") for r in rows]),
+        "body_angle_range_deg": mean([_angle_range_deg(r) for r in rows]),
+        "body_height_range_m": mean([_body(r, "height", "measured_range_m") for r in rows]),
+        "beat_coverage": mean([r.get("beat_coverage") for r in rows]),
     }
+
+
+def _body(row: dict[str, Any], column: str, key: str) -> float | None:
+    return ((row.get("body") or {}).get(column) or {}).get(key)
+
+
+def _angle_range_deg(row: dict[str, Any]) -> float | None:
+    """The largest measured range among roll, pitch and yaw, deg."""
+    ranges = [_body(row, c, "measured_range_deg") for c in ("roll", "pitch", "yaw")]
+    ranges = [v for v in ranges if v is not None]
+    return max(ranges) if ranges else None
 
 
 def markdown_report(
@@ -184,8 +200,10 @@ def markdown_report(
 ) -> str:
     head = (
         "| item | falls | FL MAE feas. (cm) | FR MAE feas. (cm) | FL corr feas. | FR corr feas. "
-        "| FL MAE (cm) | FR MAE (cm) | rear lift mean / max (cm) | BAS | sim x real time |\n"
-        "|---|---|---|---|---|---|---|---|---|---|---|\n"
+        "| FL MAE (cm) | FR MAE (cm) | rear lift mean / max (cm) | BAS "
+        "| trunk height MAE (cm) | trunk angle MAE (deg) | trunk range angle (deg) / height (cm) "
+        "| beat coverage | sim x real time |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
     )
     lines = []
     for r in rows:
@@ -196,20 +214,30 @@ def markdown_report(
             f"{_num(fr['corr_feasible'])} | {_num(fl['mae_m'], 100, 1)} | "
             f"{_num(fr['mae_m'], 100, 1)} | {_num(r['rear_lift_mean_m'], 100, 1)} / "
             f"{_num(r['rear_lift_max_m'], 100, 1)} | {_num(r['bas'])} | "
-            f"{_num(r['realtime_factor_sim'], 1, 1)} |"
+            f"{_num(_body(r, 'height', 'mae_m'), 100, 1)} | "
+            f"{_num((r.get('body') or {}).get('angle_mae_deg'), 1, 1)} | "
+            f"{_num(_angle_range_deg(r), 1, 1)} / "
+            f"{_num(_body(r, 'height', 'measured_range_m'), 100, 1)} | "
+            f"{_num(r.get('beat_coverage'))} | {_num(r['realtime_factor_sim'], 1, 1)} |"
         )
     s = summarize(rows)
     lines.append(
         f"| **mean** | {s['falls']} (total) | {_num(s['mae_feasible_m'], 100, 1)} (FL+FR) | | "
         f"{_num(s['corr_feasible'])} (FL+FR) | | {_num(s['mae_m'], 100, 1)} (FL+FR) | | "
         f"{_num(s['rear_lift_mean_m'], 100, 1)} / {_num(s['rear_lift_max_m'], 100, 1)} | "
-        f"{_num(s['bas'])} | {_num(s['realtime_factor_sim'], 1, 1)} |"
+        f"{_num(s['bas'])} | {_num(s['body_height_mae_m'], 100, 1)} | "
+        f"{_num(s['body_angle_mae_deg'], 1, 1)} | {_num(s['body_angle_range_deg'], 1, 1)} / "
+        f"{_num(s['body_height_range_m'], 100, 1)} | {_num(s['beat_coverage'])} | "
+        f"{_num(s['realtime_factor_sim'], 1, 1)} |"
     )
     return (
         f"# {title or 'quaddance evaluation'}\n\npolicy: `{policy or 'shipped'}`, "
         f"{len(rows)} items; {settings.describe()}. MAE/corr per front foot; *feas.* = the "
         "feasible part of the targets (see `quaddance.play.metrics`); BAS needs music beats "
-        "(none for a motion file alone). The same numbers: the `.json` beside this file.\n\n"
+        "(none for a motion file alone); trunk: measured pose vs the body targets (height in "
+        "cm, the mean MAE of roll, pitch, yaw in deg; range: the largest of the three, and the "
+        "height's); beat coverage: beats with a motion accent of the robot within +-100 ms. "
+        "The same numbers: the `.json` beside this file.\n\n"
         + head
         + "\n".join(lines)
         + f"\n\n![metrics]({plot_name})\n"

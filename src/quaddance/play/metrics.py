@@ -217,6 +217,45 @@ def tracking_metrics(
     return out
 
 
+#: Body-target columns (`quaddance.targets.BODY_COLUMNS`) and their report units.
+BODY_METRIC_COLUMNS: tuple[tuple[str, str], ...] = (
+    ("height", "m"),
+    ("roll", "deg"),
+    ("pitch", "deg"),
+    ("yaw", "deg"),
+)
+
+
+def body_metrics(body_targets: np.ndarray, body_measured: np.ndarray) -> dict[str, Any]:
+    """Trunk tracking: per column (height m; roll, pitch, yaw deg) the mean absolute error,
+    the correlation, and the range (max - min) of the targets and of the measured pose.
+
+    Args:
+        body_targets: (T, 4) height offset m, roll, pitch, yaw rad (relative to standing).
+        body_measured: (T, 4) the trunk's pose in the same units.
+    """
+    targets = np.asarray(body_targets, dtype=float)
+    measured = np.asarray(body_measured, dtype=float)
+    if targets.ndim != 2 or targets.shape[1] != 4 or targets.shape != measured.shape:
+        raise QuaddanceError(
+            f"body targets and measured pose must both be (T, 4), got {targets.shape} and "
+            f"{measured.shape}"
+        )
+    out: dict[str, Any] = {}
+    for i, (name, unit) in enumerate(BODY_METRIC_COLUMNS):
+        scale = 1.0 if unit == "m" else 180.0 / np.pi
+        t, m = targets[:, i] * scale, measured[:, i] * scale
+        out[name] = {
+            f"mae_{unit}": _mae(t, m),
+            "corr": pearson(t, m),
+            f"target_range_{unit}": float(np.ptp(t)) if t.size else None,
+            f"measured_range_{unit}": float(np.ptp(m)) if m.size else None,
+        }
+    angles = [out[n]["mae_deg"] for n, u in BODY_METRIC_COLUMNS if u == "deg"]
+    out["angle_mae_deg"] = None if None in angles else float(np.mean(angles))
+    return out
+
+
 def dance_metrics(
     time_s: np.ndarray,
     targets_m: np.ndarray,

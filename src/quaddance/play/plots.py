@@ -44,10 +44,14 @@ def plot_feet(
     feet_m: np.ndarray,
     beats_s: np.ndarray,
     title: str = "",
+    body_targets: np.ndarray | None = None,
+    body_measured: np.ndarray | None = None,
 ) -> Path:
     """Fig. 4 of the paper: target (dashed) and measured (solid) foot heights over time.
 
-    Three stacked panels: front-left, front-right, and both rear feet (whose target is 0).
+    Three stacked panels: front-left, front-right, and both rear feet (whose target is 0);
+    with ``body_targets`` and ``body_measured`` ((T, 4): height offset m, roll, pitch, yaw
+    rad) a fourth panel shows the trunk: height offset in cm and the angles in degrees.
     Beats are light vertical lines.
 
     Args:
@@ -72,8 +76,15 @@ def plot_feet(
     beats = np.asarray(beats_s, dtype=float).reshape(-1)
     beats = beats[(beats >= time[0]) & (beats <= time[-1])] if len(time) else beats
 
+    body = body_targets is not None and body_measured is not None
     plt = _pyplot()
-    fig, axes = plt.subplots(3, 1, figsize=(10, 6.5), sharex=True, constrained_layout=True)
+    fig, axes = plt.subplots(
+        4 if body else 3,
+        1,
+        figsize=(10, 8.5 if body else 6.5),
+        sharex=True,
+        constrained_layout=True,
+    )
     front_top_m = max(
         float(np.nanmax(targets[:, :2], initial=0.0)),
         float(np.nanmax(feet[:, :2], initial=0.0)),
@@ -97,6 +108,11 @@ def plot_feet(
     rear_ax.set_ylabel("rear height (m)")
     rear_ax.set_xlabel("time (s)")
     rear_ax.legend(loc="upper right", fontsize=8, frameon=False, ncol=3)
+    if body:
+        _body_panel(
+            axes[3], time, np.asarray(body_targets, float), np.asarray(body_measured, float)
+        )
+        rear_ax.set_xlabel("")
     for ax in axes:
         # One collection per panel: an axvline per beat took 35 s for a 20-minute song.
         ax.vlines(
@@ -109,6 +125,25 @@ def plot_feet(
         fig.suptitle(title)
     _save(fig, path)
     return Path(path)
+
+
+#: Trunk curves of the body panel: (column, label, scale to the plotted unit, colour).
+BODY_CURVES = (
+    (0, "height (cm)", 100.0, "#444444"),
+    (1, "roll (deg)", float(np.rad2deg(1.0)), "#1f77b4"),
+    (2, "pitch (deg)", float(np.rad2deg(1.0)), "#d62728"),
+    (3, "yaw (deg)", float(np.rad2deg(1.0)), "#2ca02c"),
+)
+
+
+def _body_panel(ax, time: np.ndarray, targets: np.ndarray, measured: np.ndarray) -> None:
+    """The trunk's pose: target dashed, measured solid, one colour per column."""
+    for col, label, scale, colour in BODY_CURVES:
+        ax.plot(time, targets[:, col] * scale, "--", color=colour, lw=1.0)
+        ax.plot(time, measured[:, col] * scale, "-", color=colour, lw=1.1, alpha=0.9, label=label)
+    ax.set_ylabel("trunk (cm, deg)")
+    ax.set_xlabel("time (s)")
+    ax.legend(loc="upper right", fontsize=8, frameon=False, ncol=4, title="dashed: target")
 
 
 def _get(row: Mapping[str, Any], *keys: str) -> float:

@@ -555,7 +555,8 @@ def _check_agreement(r: _Reader, spec: PolicySpec) -> None:
     from quaddance.sim.observations import actor_terms  # torch: only once a file is checked
 
     ours = [
-        (t["name"], t["size"]) for t in actor_terms(cfg.obs.history_len, len(cfg.obs.preview_s))
+        (t["name"], t["size"])
+        for t in actor_terms(cfg.obs.history_len, len(cfg.obs.preview_s), cfg.whole_body)
     ]
     theirs = [(t.name, t.size) for t in spec.obs_layout]
     if theirs != ours:

@@ -35,6 +35,57 @@ class RolloutResult:
     falls_s: list[float]
     sim_wall_s: float
     pushes_s: list[float] = dataclasses.field(default_factory=list)  # when a push was given
+    base_height_m: np.ndarray | None = None  # (T,) trunk height above the floor
+    base_rpy_rad: np.ndarray | None = None  # (T, 3) trunk roll, pitch, yaw
+    body_targets: np.ndarray | None = None  # (T, 4) the dance's body targets
+
+    def body_measured(self, standing_height_m: float) -> np.ndarray:
+        """(T, 4) the trunk's pose in body-target units: height offset from the standing
+        height, roll, pitch, and yaw as the twist since the first step (the heading the
+        dance began with is its zero)."""
+        n = self.time_s.size
+        height = self.base_height_m if self.base_height_m is not None else np.zeros(n)
+        rpy = self.base_rpy_rad if self.base_rpy_rad is not None else np.zeros((n, 3))
+        out = np.column_stack([height - standing_height_m, rpy])
+        if n:
+            out[:, 3] = np.unwrap(out[:, 3]) - out[0, 3]
+        return out
+
+
+#: Keys of rollout.npz (`save_rollout`), written by `dance` and `live` alike.
+ROLLOUT_KEYS: tuple[str, ...] = (
+    "time_s",
+    "foot_heights_m",
+    "base_height_m",
+    "base_rpy_rad",
+    "targets_m",
+    "body_targets",
+    "beats_s",
+)
+
+
+def save_rollout(path, result: RolloutResult, beats_s: np.ndarray) -> None:
+    """Write rollout.npz: what the simulated robot did at the policy rate (`ROLLOUT_KEYS`):
+    time_s (T,), foot_heights_m (T, 4; FL, FR, RL, RR), base_height_m (T,), base_rpy_rad
+    (T, 3), targets_m (T, 4), body_targets (T, 4), beats_s (B,). Atomic: complete or absent."""
+    from quaddance.fileio import atomic_path
+
+    n = result.time_s.size
+    arrays = {
+        "time_s": result.time_s,
+        "foot_heights_m": result.feet_m,
+        "base_height_m": result.base_height_m if result.base_height_m is not None else np.zeros(n),
+        "base_rpy_rad": result.base_rpy_rad
+        if result.base_rpy_rad is not None
+        else np.zeros((n, 3)),
+        "targets_m": result.targets_m,
+        "body_targets": result.body_targets
+        if result.body_targets is not None
+        else np.zeros((n, 4)),
+        "beats_s": np.asarray(beats_s, dtype=float),
+    }
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        np.savez(f, **{k: np.asarray(v, dtype=np.float64) for k, v in arrays.items()})
 
 
 PolicyOutput = Literal["policy", "zero"]
@@ -127,7 +178,7 @@ def playback_env(
     ff = policy.meta.get("front_feedforward") or {}
     env = DanceEnv(
         cfg,
-        dance.targets_m[None],
+        np.concatenate([dance.targets_m, dance.body_targets], axis=1)[None],
         engine="cpu",
         seed=seed,
         random_start=False,
@@ -199,6 +250,9 @@ def _play(
     qpos = np.zeros((n_steps, env.engine.nq))
     feet = np.zeros((n_steps, 4))
     targets = np.zeros((n_steps, 4))
+    body_targets = np.zeros((n_steps, 4))
+    base_height = np.zeros(n_steps)
+    base_rpy = np.zeros((n_steps, 3))
     falls: list[float] = []
     obs = env.get_observations()["actor"].numpy()
     start = time.perf_counter()
@@ -206,6 +260,9 @@ def _play(
         qpos[t] = env.engine.read().qpos[0].numpy()
         feet[t] = env.robot.foot_height_m[0].numpy()
         targets[t] = env.targets_at(0)[0].numpy()
+        body_targets[t] = env.body_targets_at(0)[0].numpy()
+        base_height[t] = float(env.robot.base_pos_w[0, 2])
+        base_rpy[t] = env.robot.base_rpy_rad[0].numpy()
         if on_pose is not None:
             on_pose(t, qpos[t], targets[t])
         if t in pushes:
@@ -230,4 +287,7 @@ def _play(
         falls_s=falls,
         sim_wall_s=time.perf_counter() - start,
         pushes_s=pushed_s,
+        base_height_m=base_height,
+        base_rpy_rad=base_rpy,
+        body_targets=body_targets,
     )

@@ -43,6 +43,12 @@ class RewardCfg:
     foot_slip: float = -0.04
     base_drift: float = -1.0  # horizontal base velocity: dance in place
     yaw_rate: float = -0.5
+    # Whole-body dance (DanceTaskCfg.whole_body): trunk-pose tracking in eq. 2's exp form,
+    # c_body (exp(-lambda |e|) - 1) per term. base_height, base_orientation and yaw_rate
+    # above are measured relative to the body target, so they equal the old terms at zero.
+    c_body: float = 30.0
+    lambda_body_height_per_m: float = 10.0  # 1 cm off: -2.9 / s, like a front foot 1 cm off
+    lambda_body_angle_per_rad: float = 3.0  # 3 deg off: -4.4 / s
     termination: float = -200.0  # once per fall; outweighs the discounted penalties it escapes
 
     @classmethod
@@ -104,6 +110,11 @@ class DanceTaskCfg:
     # Ours: add to each front leg the joint offsets that lift its foot to the target
     # (quaddance.sim.feedforward); the policy corrects and balances.
     front_feedforward: bool = True
+    # Ours, beyond the paper: the trunk dances too. The dance's body targets (height offset,
+    # roll, pitch, yaw; `quaddance.targets.BODY_COLUMNS`) enter the actor's observation, the
+    # rewards track them, and a body feed-forward (quaddance.sim.body) moves all four legs
+    # to hold the feet still while the trunk takes the pose.
+    whole_body: bool = False
     max_tilt_rad: float = 1.0  # termination
     min_base_height_m: float = 0.12  # termination
     scene: SceneCfg = field(default_factory=SceneCfg)

@@ -125,6 +125,7 @@ class ActorObservation:
         self.device = torch.device(device)
         self.history_len = cfg.obs.history_len
         self.preview_steps = [round(s * cfg.policy_hz) for s in cfg.obs.preview_s]
+        self.whole_body = cfg.whole_body
         self.nominal_joint_pos = torch.tensor(go1.nominal_joint_pos(), device=self.device)
         self.geom = leg_geometry(cfg.scene)
         self.history = torch.zeros(num_envs, self.history_len, PROPRIO_DIM, device=self.device)
@@ -133,10 +134,21 @@ class ActorObservation:
         """(N, PROPRIO_DIM): the `PROPRIO_TERMS`, in order."""
         return torch.cat([t.fn(meas, last_action, self) for t in PROPRIO_TERMS], dim=1)
 
-    def build(self, prop: torch.Tensor, targets_at: Callable[[int], torch.Tensor]) -> torch.Tensor:
-        """(N, dim): ``targets_at(k)`` gives the (N, 4) targets k policy steps ahead, m."""
+    def build(
+        self,
+        prop: torch.Tensor,
+        targets_at: Callable[[int], torch.Tensor],
+        body_targets_at: Callable[[int], torch.Tensor] | None = None,
+    ) -> torch.Tensor:
+        """(N, dim): ``targets_at(k)`` gives the (N, 4) paw targets k policy steps ahead, m;
+        ``body_targets_at(k)`` the (N, 4) body targets (whole-body dance only)."""
         parts = [prop, self.history.flatten(1), targets_at(0)[:, :2]]
         parts += [targets_at(k)[:, :2] for k in self.preview_steps]
+        if self.whole_body:
+            if body_targets_at is None:
+                raise ValueError("a whole-body policy needs the dance's body targets")
+            parts.append(body_targets_at(0))
+            parts += [body_targets_at(k) for k in self.preview_steps]
         return torch.cat(parts, dim=1)
 
     def push(self, prop: torch.Tensor) -> None:
@@ -151,10 +163,10 @@ class ActorObservation:
 
     def layout(self) -> list[dict]:
         """Actor terms in order: name, size and sensor source (the policy JSON's `obs.terms`)."""
-        return actor_terms(self.history_len, len(self.preview_steps))
+        return actor_terms(self.history_len, len(self.preview_steps), self.whole_body)
 
 
-def actor_terms(history_len: int, n_preview: int) -> list[dict]:
+def actor_terms(history_len: int, n_preview: int, whole_body: bool = False) -> list[dict]:
     """The actor's terms in order, each `{"name", "size", "source"}`."""
     terms = [
         {"name": f"proprio.{t.name}", "size": t.size, "source": t.source} for t in PROPRIO_TERMS
@@ -167,6 +179,10 @@ def actor_terms(history_len: int, n_preview: int) -> list[dict]:
     terms.append({"name": "front_targets_now_m", "size": 2, "source": "dance"})
     if n_preview:
         terms.append({"name": "front_targets_preview_m", "size": 2 * n_preview, "source": "dance"})
+    if whole_body:
+        terms.append({"name": "body_targets_now", "size": 4, "source": "dance"})
+        if n_preview:
+            terms.append({"name": "body_targets_preview", "size": 4 * n_preview, "source": "dance"})
     return terms
 
 

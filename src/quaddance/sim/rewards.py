@@ -58,12 +58,56 @@ def collision(env: DanceEnv) -> torch.Tensor:
     return env.robot.leg_contacts.float()
 
 
+def target_gravity_b(body: torch.Tensor) -> torch.Tensor:
+    """(N, 3) gravity direction in the trunk frame when the trunk has the body targets' roll
+    and pitch (yaw does not change it)."""
+    r, p = body[:, 1], body[:, 2]
+    return torch.stack([p.sin(), -p.cos() * r.sin(), -p.cos() * r.cos()], dim=1)
+
+
 def base_orientation(env: DanceEnv) -> torch.Tensor:
-    return (env.robot.projected_gravity_b[:, :2] ** 2).sum(dim=1)
+    """Squared tilt away from the body target's roll and pitch (level when there is none)."""
+    g_star = target_gravity_b(env.body_targets_at(0))
+    return ((env.robot.projected_gravity_b[:, :2] - g_star[:, :2]) ** 2).sum(dim=1)
+
+
+def _height_target_m(env: DanceEnv) -> torch.Tensor:
+    return env.cfg.rewards.base_height_target_m + env.body_targets_at(0)[:, 0]
 
 
 def base_height(env: DanceEnv) -> torch.Tensor:
-    return (env.robot.base_pos_w[:, 2] - env.cfg.rewards.base_height_target_m) ** 2
+    return (env.robot.base_pos_w[:, 2] - _height_target_m(env)) ** 2
+
+
+def _exp_tracking(err: torch.Tensor, lam: float, c: float) -> torch.Tensor:
+    return c * (torch.exp(-lam * err.abs()) - 1.0)
+
+
+def body_height_tracking(env: DanceEnv) -> torch.Tensor:
+    """Trunk height vs standing height + the target's offset, eq. 2's exp form."""
+    cfg = env.cfg.rewards
+    err = env.robot.base_pos_w[:, 2] - _height_target_m(env)
+    return _exp_tracking(err, cfg.lambda_body_height_per_m, cfg.c_body)
+
+
+def body_tilt_tracking(env: DanceEnv) -> torch.Tensor:
+    """Roll and pitch vs the target's: the gravity direction's distance (about the angle)."""
+    cfg = env.cfg.rewards
+    g_star = target_gravity_b(env.body_targets_at(0))
+    err = (env.robot.projected_gravity_b - g_star).norm(dim=1)
+    return _exp_tracking(err, cfg.lambda_body_angle_per_rad, cfg.c_body)
+
+
+def body_yaw_tracking(env: DanceEnv) -> torch.Tensor:
+    """Heading vs the target yaw; episodes start facing yaw 0, so heading = twist."""
+    cfg = env.cfg.rewards
+    err = (
+        torch.remainder(
+            env.robot.base_yaw_rad - env.body_targets_at(0)[:, 3] + torch.pi, 2 * torch.pi
+        )
+        - torch.pi
+    )
+    return _exp_tracking(err, cfg.lambda_body_angle_per_rad, cfg.c_body)
 
 
 def joint_limits(env: DanceEnv) -> torch.Tensor:
@@ -85,7 +129,9 @@ def base_drift(env: DanceEnv) -> torch.Tensor:
 
 
 def yaw_rate(env: DanceEnv) -> torch.Tensor:
-    return env.robot.base_ang_vel_b[:, 2] ** 2
+    """Squared yaw rate beyond the body target's (zero when the trunk does not twist)."""
+    want = (env.body_targets_at(1)[:, 3] - env.body_targets_at(0)[:, 3]) / env.cfg.step_dt_s
+    return (env.robot.base_ang_vel_b[:, 2] - want) ** 2
 
 
 # name -> (term, weight attribute of RewardCfg or None for weight 1)
@@ -105,4 +151,10 @@ TERMS = {
     "foot_slip": (foot_slip, "foot_slip"),
     "base_drift": (base_drift, "base_drift"),
     "yaw_rate": (yaw_rate, "yaw_rate"),
+}
+#: Terms of whole-body dance only (DanceTaskCfg.whole_body); weight 1, c_body carries it.
+BODY_TERMS = {
+    "body_height_tracking": (body_height_tracking, None),
+    "body_tilt_tracking": (body_tilt_tracking, None),
+    "body_yaw_tracking": (body_yaw_tracking, None),
 }

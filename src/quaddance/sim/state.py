@@ -70,6 +70,20 @@ class RobotState:
         return quat_rotate_inverse(self.base_quat_w, gravity_w)
 
     @functools.cached_property
+    def base_rpy_rad(self) -> torch.Tensor:
+        """(N, 3) roll, pitch, yaw of the trunk (extrinsic x-y-z, as `sim.body.rpy_matrix`)."""
+        w, x, y, z = self.base_quat_w.unbind(1)
+        roll = torch.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+        pitch = torch.asin((2 * (w * y - z * x)).clamp(-1.0, 1.0))
+        yaw = torch.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+        return torch.stack([roll, pitch, yaw], dim=1)
+
+    @property
+    def base_yaw_rad(self) -> torch.Tensor:
+        """(N,) heading of the trunk about the world vertical, rad."""
+        return self.base_rpy_rad[:, 2]
+
+    @functools.cached_property
     def base_lin_vel_b(self) -> torch.Tensor:
         return quat_rotate_inverse(self.base_quat_w, self.base_lin_vel_w)
 

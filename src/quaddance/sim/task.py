@@ -13,6 +13,7 @@ import numpy as np
 import torch
 
 from quaddance.sim import go1, observations, rewards, terminations
+from quaddance.sim.body import BODY_DIM, BodyFeedforward
 from quaddance.sim.config import DanceTaskCfg
 from quaddance.sim.engines import make_engine, nominal_dynamics
 from quaddance.sim.feedforward import FrontLiftFeedforward
@@ -44,18 +45,24 @@ def joint_targets(
     action_scale: torch.Tensor,
     feedforward: FrontLiftFeedforward | None,
     targets_at: Callable[[int], torch.Tensor],
+    body_feedforward: BodyFeedforward | None = None,
+    body_targets_at: Callable[[int], torch.Tensor] | None = None,
 ) -> torch.Tensor:
-    """(N, 12) PD targets: nominal pose + scaled actions + the front-lift feed-forward for the
-    targets due after this step (the contract written into the policy's JSON). Training and
-    the robot runner (deploy/) both call this."""
+    """(N, 12) PD targets: nominal pose + scaled actions + the front-lift feed-forward (and,
+    for whole-body dance, the body feed-forward) for the targets due after this step (the
+    contract written into the policy's JSON). Training and the robot runner (deploy/) both
+    call this."""
     target = nominal_joint_pos + action_scale * actions
     if feedforward is not None:
         target = target + feedforward(targets_at(1)[:, :2])
+    if body_feedforward is not None and body_targets_at is not None:
+        target = target + body_feedforward(body_targets_at(1))
     return target
 
 
 class DanceEnv:
-    """Vectorised dance task. `bank` (B, L, 4) holds target sequences at the policy rate.
+    """Vectorised dance task. `bank` (B, L, 4) holds paw-target sequences at the policy rate,
+    or (B, L, 8) paw then body targets (`quaddance.targets.BODY_COLUMNS`) for whole-body dance.
 
     Implements rsl-rl's `VecEnv` interface by duck typing: importing it (with tensordict,
     which imports torch._dynamo) would cost playback 2 s. With `compute_rewards=False`
@@ -92,8 +99,12 @@ class DanceEnv:
         self._variants = torch.as_tensor(self.engine.variants, dtype=torch.float32, device=dev)
 
         bank_t = torch.as_tensor(np.asarray(bank), dtype=torch.float32)
-        if bank_t.ndim != 3 or bank_t.shape[2] != 4:
-            raise ValueError(f"target bank must be (B, L, 4), got {tuple(bank_t.shape)}")
+        if bank_t.ndim != 3 or bank_t.shape[2] not in (4, 4 + BODY_DIM):
+            raise ValueError(
+                f"target bank must be (B, L, 4) or (B, L, 8), got {tuple(bank_t.shape)}"
+            )
+        if bank_t.shape[2] == 4:  # no body targets: the trunk stands still
+            bank_t = torch.cat([bank_t, torch.zeros(*bank_t.shape[:2], BODY_DIM)], dim=2)
         self.bank = bank_t.to(dev)
         self.random_start = random_start
         # The actor's observation: the same builder as the robot runner's (deploy/).
@@ -112,6 +123,7 @@ class DanceEnv:
             if cfg.front_feedforward
             else None
         )
+        self.body_feedforward = BodyFeedforward(cfg.scene, dev) if cfg.whole_body else None
         lo = torch.tensor(model.jnt_range[1:, 0], dtype=torch.float32, device=dev)
         hi = torch.tensor(model.jnt_range[1:, 1], dtype=torch.float32, device=dev)
         mid, half = (lo + hi) / 2, (hi - lo) / 2 * 0.9
@@ -133,12 +145,20 @@ class DanceEnv:
         self.reset_all()
 
     # --- targets ---------------------------------------------------------------------------
-    def targets_at(self, ahead_steps: int) -> torch.Tensor:
-        """(N, 4) targets `ahead_steps` policy steps from now (held at the sequence's end)."""
+    def _bank_at(self, ahead_steps: int) -> torch.Tensor:
         t = (self.bank_offset + self.episode_length_buf + ahead_steps).clamp(
             max=self.bank.shape[1] - 1
         )
         return self.bank[self.bank_idx, t]
+
+    def targets_at(self, ahead_steps: int) -> torch.Tensor:
+        """(N, 4) paw targets `ahead_steps` policy steps from now (held at the sequence's end)."""
+        return self._bank_at(ahead_steps)[:, :4]
+
+    def body_targets_at(self, ahead_steps: int) -> torch.Tensor:
+        """(N, 4) body targets (height offset m, roll, pitch, yaw rad) `ahead_steps` from now;
+        zeros for a paws-only dance."""
+        return self._bank_at(ahead_steps)[:, 4:]
 
     # --- VecEnv interface ----------------------------------------------------------------------
     def get_observations(self):
@@ -146,7 +166,7 @@ class DanceEnv:
         a dict of (N, k) tensors in playback."""
         prop = self._proprio()
         self._last_proprio = prop  # the next step's history frame
-        actor = self.actor_obs.build(prop, self.targets_at)
+        actor = self.actor_obs.build(prop, self.targets_at, self.body_targets_at)
         groups = {"actor": actor}
         if self.cfg.obs.privileged_critic:
             groups["critic"] = torch.cat([actor, observations.privileged(self)], dim=1)
@@ -188,7 +208,13 @@ class DanceEnv:
 
     def joint_targets(self, actions: torch.Tensor) -> torch.Tensor:
         return joint_targets(
-            actions, self.nominal_joint_pos, self.action_scale, self.feedforward, self.targets_at
+            actions,
+            self.nominal_joint_pos,
+            self.action_scale,
+            self.feedforward,
+            self.targets_at,
+            self.body_feedforward,
+            self.body_targets_at,
         )
 
     # --- internals -------------------------------------------------------------------------------
@@ -222,7 +248,8 @@ class DanceEnv:
         dt = self.cfg.step_dt_s
         total = torch.zeros(self.num_envs, device=self.device)
         terms = {}
-        for name, (fn, weight_attr) in rewards.TERMS.items():
+        table = {**rewards.TERMS, **rewards.BODY_TERMS} if self.cfg.whole_body else rewards.TERMS
+        for name, (fn, weight_attr) in table.items():
             w = 1.0 if weight_attr is None else getattr(cfg, weight_attr)
             if w == 0.0:
                 continue
@@ -240,6 +267,18 @@ class DanceEnv:
             "/metrics/front_abs_err_m": front_err.mean(),
             "/metrics/rear_lift_m": self.robot.foot_height_m[:, 2:].clamp(min=0).mean(),
             "/metrics/falls": fell.float().sum(),
+            "/metrics/body_height_err_m": (
+                self.robot.base_pos_w[:, 2]
+                - self.cfg.rewards.base_height_target_m
+                - self.body_targets_at(0)[:, 0]
+            )
+            .abs()
+            .mean(),
+            "/metrics/body_tilt_err_rad": (
+                self.robot.projected_gravity_b - rewards.target_gravity_b(self.body_targets_at(0))
+            )
+            .norm(dim=1)
+            .mean(),
             "/metrics/episodes_ended": done.float().sum(),
         }
 

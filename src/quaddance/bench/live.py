@@ -1,0 +1,359 @@
+"""Online beat tracking against the offline analyser, on songs with exactly known beats.
+
+Each song is fed through ``FileSource(realtime=False)`` and the ``OnlineBeatTracker`` block by
+block, exactly as ``quaddance live --from-file`` does it but without waiting for the wall
+clock. Per song: ``lock_s`` (the first stable lock), the online beat F-measure after the lock
+(+-70 ms, at the tracker's own metrical level, as ``bench beats`` scores), the offline
+analyser's F-measure over the same span of the same song, and their difference.
+
+Song sets (``LIVE_SETS``): ``random`` and ``untuned`` are the beat benchmark's sets
+(``bench/beats.py``) that the online tracker was never tuned on (its settings were set on the
+``tuning`` set and on click tracks); ``live`` holds songs made here for the live case: a tempo
+change and breaks of silence after which the music comes back at another tempo or phase.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from quaddance.bench.beats import (
+    F_MEASURE_WINDOW_S,
+    beat_f_measure,
+    bench_songs,
+    metrical_level_f_measure,
+)
+from quaddance.bench.beats import SETS as BEAT_SETS
+from quaddance.errors import QuaddanceError
+
+LIVE_SETS = (*BEAT_SETS, "live")
+"""``tuning``, ``random``, ``untuned`` (``bench/beats.py``) and ``live`` (``live_songs``)."""
+
+DEFAULT_SETS = ("random", "untuned", "live")
+"""The sets reported by default: those the online tracker was not tuned on."""
+
+GOAL_LOCK_S = 6.0
+"""Issue 11's goal: the first stable lock within 6 s of the music starting."""
+GOAL_F_GAP = 0.1
+"""Issue 11's goal: online F-measure within 0.1 of the offline analyser's."""
+
+
+@dataclass
+class LiveSong:
+    name: str
+    set: str
+    y: np.ndarray  # (n,) mono audio at the tracker's rate
+    beats_s: np.ndarray  # (n_beats,) exact beat times, s (none inside a silent break)
+    downbeats_s: np.ndarray  # (n_bars,) exact downbeat times, s
+    music_starts_s: tuple[float, ...] = (0.0,)  # where the music (re)starts after silence
+
+
+def _concat_with_breaks(
+    parts: list[tuple[np.ndarray, np.ndarray]], gap_s: float, sr: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[float, ...]]:
+    """Join songs with ``gap_s`` of digital silence between them; shift their beats.
+
+    Returns (audio, beats s, downbeats s, start of each part s); every part starts on a
+    downbeat and is in 4/4."""
+    ys, beats, downbeats, starts = [], [], [], []
+    t0 = 0.0
+    for k, (y, b) in enumerate(parts):
+        if k > 0:
+            ys.append(np.zeros(round(gap_s * sr), dtype=np.float32))
+            t0 += gap_s
+        starts.append(t0)
+        dur_s = len(y) / sr
+        beats.append(b[b < dur_s - 1e-6] + t0)
+        downbeats.append(beats[-1][::4])
+        ys.append(y.astype(np.float32))
+        t0 += dur_s
+    return np.concatenate(ys), np.concatenate(beats), np.concatenate(downbeats), tuple(starts)
+
+
+def live_songs(sr: int) -> list[LiveSong]:
+    """Songs for the live case, made with ``music.synth`` (seeds not used anywhere else)."""
+    from quaddance.music.synth import render_song
+
+    def song(bpm: float, dur_s: float, seed: int, **kw: Any) -> tuple[np.ndarray, np.ndarray]:
+        y, truth = render_song(tempo_bpm=bpm, duration_s=dur_s, seed=seed, sr=sr, **kw)
+        return y, truth.beats_s
+
+    out = []
+    y, b, db, _ = _concat_with_breaks([song(100.0, 30.0, 301, tempo_change=(14.0, 132.0))], 0, sr)
+    out.append(LiveSong("live_100_to_132", "live", y, b, db))
+    y, b, db, starts = _concat_with_breaks(
+        [song(112.0, 14.0, 302), song(86.0, 16.0, 303, swing=0.5)], gap_s=3.0, sr=sr
+    )
+    out.append(LiveSong("live_112_break_86", "live", y, b, db, starts))
+    y, b, db, starts = _concat_with_breaks(
+        [song(128.0, 12.0, 304, syncopation=True), song(128.0, 14.0, 305)], gap_s=2.2, sr=sr
+    )
+    out.append(LiveSong("live_128_break_phase", "live", y, b, db, starts))
+    return out
+
+
+def _beat_songs(sets: tuple[str, ...], sr: int, n_random: int, cache_dir: Path) -> list[LiveSong]:
+    songs = bench_songs(sets, sr=sr, n_random=n_random, cache_dir=cache_dir)
+    # Every beat-bench song is in 4/4 and starts on a downbeat.
+    return [LiveSong(s.name, s.set, s.y, s.beats_s, s.beats_s[::4]) for s in songs]
+
+
+def track_online(y: np.ndarray, sr: int) -> tuple[list[Any], list[tuple[float, bool]], float]:
+    """Feed ``y`` through the live path without real-time pacing.
+
+    Returns:
+        ``(beats, lock_track, cpu_s)``: the beat events, (song time, locked) after each block,
+        and the tracker's processing time, seconds.
+    """
+    from quaddance.music.live import ArraySource
+    from quaddance.music.online_beats import OnlineBeatTracker
+
+    tracker = OnlineBeatTracker(sr)
+    beats: list[Any] = []
+    lock_track: list[tuple[float, bool]] = []
+    cpu_s = 0.0
+    for block in ArraySource(y, sr):
+        t0 = time.perf_counter()
+        beats += tracker.update(block.samples, block.t_end_s)
+        cpu_s += time.perf_counter() - t0
+        lock_track.append((block.t_end_s, tracker.state.locked))
+    return beats, lock_track, cpu_s
+
+
+def _relock_s(lock_track: list[tuple[float, bool]], start_s: float) -> float | None:
+    """Seconds from ``start_s`` to the first locked block at or after it (None if never)."""
+    for t, locked in lock_track:
+        if t >= start_s and locked:
+            return t - start_s
+    return None
+
+
+def _score_song(song: LiveSong, sr: int) -> dict[str, Any]:
+    from quaddance.music.analysis import analyze
+
+    beats, lock_track, cpu_s = track_online(song.y, sr)
+    offline = analyze(song.y, sr)
+    offline_s = offline.beats_s
+    online_s = np.array([b.time_s for b in beats])
+    latency_s = max((b.reported_s - b.time_s for b in beats), default=0.0)
+    lock_s = _relock_s(lock_track, 0.0)
+    duration_s = len(song.y) / sr
+    row: dict[str, Any] = {
+        "name": song.name,
+        "set": song.set,
+        "duration_s": round(duration_s, 2),
+        "lock_s": None if lock_s is None else round(lock_s, 3),
+    }
+    # Scored after the lock, for both trackers, so that the offline analyser is judged on the
+    # same stretch of music; a song that never locks scores 0 online.
+    start_s = lock_s if lock_s is not None else duration_s
+    ref = song.beats_s[song.beats_s >= start_s]
+    f_online = metrical_level_f_measure(ref, online_s[online_s >= start_s])
+    f_offline = metrical_level_f_measure(ref, offline_s[offline_s >= start_s])
+    if lock_s is None:
+        f_offline = metrical_level_f_measure(song.beats_s, offline_s)
+    # Downbeats: strict F-measure (a bar phase one beat off scores 0), same span.
+    true_db = song.downbeats_s[song.downbeats_s >= start_s]
+    online_db = np.array([b.time_s for b in beats if b.downbeat and b.time_s >= start_s])
+    offline_db = offline.downbeats_s[offline.downbeats_s >= start_s]
+    row.update(
+        {
+            "f_online": round(f_online, 4),
+            "f_offline": round(f_offline, 4),
+            "f_diff": round(f_online - f_offline, 4),
+            "f_online_whole_song": round(metrical_level_f_measure(song.beats_s, online_s), 4),
+            "f_downbeat_online": round(beat_f_measure(true_db, online_db), 4),
+            "f_downbeat_offline": round(beat_f_measure(true_db, offline_db), 4),
+            "tempo_bpm_end": round(beats[-1].tempo_bpm, 2) if beats else 0.0,
+            "max_report_delay_ms": round(1000.0 * latency_s, 2),
+            "cpu_per_audio_s": round(cpu_s / duration_s, 4),
+        }
+    )
+    if len(song.music_starts_s) > 1:
+        relocks = [_relock_s(lock_track, s) for s in song.music_starts_s[1:]]
+        row["relock_s"] = [None if r is None else round(r, 3) for r in relocks]
+    return row
+
+
+def bench_live_tracker(
+    sets: tuple[str, ...] = DEFAULT_SETS,
+    n_random: int = 12,
+    cache_dir: Path = Path("benchmarks/cache"),
+    progress: Callable[[str], None] | None = None,
+) -> dict[str, Any]:
+    """Score the online tracker and the offline analyser on ``sets``; write nothing.
+
+    Args:
+        sets: which of ``LIVE_SETS`` to score (default: the ones not tuned on).
+        n_random: songs in the beat benchmark's random set.
+        cache_dir: where the beat benchmark keeps its rendered songs.
+        progress: called with each song's name before it is scored.
+
+    Returns:
+        ``{"songs": [per-song rows], "means": {set: ...}, "goals": {...}, ...}``; a row has
+        ``lock_s`` (None if it never locked), ``f_online``, ``f_offline``, ``f_diff``,
+        ``relock_s`` (songs with breaks), the largest report delay and the CPU time.
+    """
+    from quaddance.music.online_beats import LATENCY_S, SR_HZ
+
+    unknown = set(sets) - set(LIVE_SETS)
+    if unknown:
+        raise QuaddanceError(f"unknown live-bench set(s) {sorted(unknown)}; choose {LIVE_SETS}")
+    beat_sets = tuple(s for s in sets if s in BEAT_SETS)
+    songs = _beat_songs(beat_sets, SR_HZ, n_random, cache_dir) if beat_sets else []
+    if "live" in sets:
+        songs += live_songs(SR_HZ)
+    rows = []
+    for song in songs:
+        if progress is not None:
+            progress(song.name)
+        rows.append(_score_song(song, SR_HZ))
+    means: dict[str, dict[str, Any]] = {}
+    for set_name in sets:
+        in_set = [r for r in rows if r["set"] == set_name]
+        if not in_set:
+            continue
+        locks = [r["lock_s"] for r in in_set if r["lock_s"] is not None]
+        means[set_name] = {
+            "n_songs": len(in_set),
+            "n_locked": len(locks),
+            "lock_s_median": round(float(np.median(locks)), 3) if locks else None,
+            "f_online": round(float(np.mean([r["f_online"] for r in in_set])), 4),
+            "f_offline": round(float(np.mean([r["f_offline"] for r in in_set])), 4),
+            "f_diff": round(float(np.mean([r["f_diff"] for r in in_set])), 4),
+            "f_downbeat_online": round(float(np.mean([r["f_downbeat_online"] for r in in_set])), 4),
+            "f_downbeat_offline": round(
+                float(np.mean([r["f_downbeat_offline"] for r in in_set])), 4
+            ),
+        }
+    n_lock_goal = sum(1 for r in rows if r["lock_s"] is not None and r["lock_s"] <= GOAL_LOCK_S)
+    n_f_goal = sum(1 for r in rows if r["f_diff"] >= -GOAL_F_GAP)
+    return {
+        "benchmark": "live_tracker",
+        "metric": (
+            f"beat F-measure, +-{F_MEASURE_WINDOW_S * 1000:.0f} ms, one-to-one, at the "
+            "tracker's own metrical level (bench beats' f_metrical), over the beats after the "
+            "first stable lock, for the online tracker and the offline analyser alike"
+        ),
+        "latency_s": LATENCY_S,
+        "sets": list(sets),
+        "goals": {
+            "lock_within_s": GOAL_LOCK_S,
+            "f_gap_at_most": GOAL_F_GAP,
+            "songs_locked_in_time": f"{n_lock_goal}/{len(rows)}",
+            "songs_within_f_gap": f"{n_f_goal}/{len(rows)}",
+        },
+        "means": means,
+        "songs": rows,
+    }
+
+
+#: Issue 11's goals for the whole live loop (`bench_live_dance`).
+GOAL_ACCENT_COVERAGE = 0.6
+GOAL_ACCENT_OFFSET_MS = 60.0
+GOAL_LOOP_P99_MS = 20.0
+
+
+def _accent_stats(accents_s: np.ndarray, beats_s: np.ndarray, tol_s: float) -> tuple[float, float]:
+    """(fraction of beats with an accent within tol, median |offset| of those, ms)."""
+    if beats_s.size == 0:
+        return 0.0, float("nan")
+    if accents_s.size == 0:
+        return 0.0, float("nan")
+    idx = np.clip(np.searchsorted(accents_s, beats_s), 1, accents_s.size - 1)
+    left, right = accents_s[idx - 1], accents_s[np.minimum(idx, accents_s.size - 1)]
+    off = np.minimum(np.abs(beats_s - left), np.abs(beats_s - right))
+    hit = off <= tol_s
+    median_ms = float(np.median(off[hit]) * 1e3) if hit.any() else float("nan")
+    return float(hit.mean()), median_ms
+
+
+def bench_live_dance(
+    work_dir: Path,
+    names: tuple[str, ...] | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> dict[str, Any]:
+    """Run `quaddance live --from-file` (simulated robot, wall clock, shipped policy) on the
+    ``live`` songs, whose beats are known exactly, and score the whole loop per song: the
+    lock, falls, the loop time, the audio-to-command latency, and the robot's motion accents
+    (measured in the simulator: paw lift peaks and trunk turning points, `choreo.accents`)
+    against the true beats after the lock (+-100 ms) with their median offset."""
+    import soundfile as sf
+
+    from quaddance.choreo.accents import BEAT_TOLERANCE_S, motion_accents_s
+    from quaddance.live.session import LiveJob, run_live
+    from quaddance.music.online_beats import SR_HZ
+
+    songs = [s for s in live_songs(SR_HZ) if names is None or s.name in names]
+    rows = []
+    for song in songs:
+        if progress is not None:
+            progress(song.name)
+        folder = Path(work_dir) / song.name
+        folder.mkdir(parents=True, exist_ok=True)
+        wav = folder / f"{song.name}.wav"
+        sf.write(wav, song.y, SR_HZ)
+        summary, paths = run_live(LiveJob(out_dir=folder, from_file=wav))
+        with np.load(paths["rollout"]) as z:
+            t, feet = z["time_s"], z["foot_heights_m"]
+            body = np.column_stack([z["base_height_m"], z["base_rpy_rad"]])
+        body[:, 0] -= np.median(body[:, 0])
+        body[:, 3] -= body[0, 3]
+        accents = np.sort(motion_accents_s(t, feet, body))
+        lock = summary["lock_s"]
+        after = song.beats_s[song.beats_s > (lock if lock is not None else np.inf)]
+        after = after[after < t[-1] - 0.5]
+        coverage, offset_ms = _accent_stats(accents, after, BEAT_TOLERANCE_S)
+        rows.append(
+            {
+                "name": song.name,
+                "duration_s": summary["duration_s"],
+                "lock_s": lock,
+                "falls": summary["falls"],
+                "accent_coverage_after_lock": round(coverage, 4),
+                "accent_median_offset_ms": None if np.isnan(offset_ms) else round(offset_ms, 1),
+                "loop_ms": summary["loop_ms"],
+                "latency_ms": summary["latency_ms"],
+                "online_beats": len(summary["beats_s"]),
+            }
+        )
+    ok = [
+        r["lock_s"] is not None
+        and r["lock_s"] <= GOAL_LOCK_S
+        and r["falls"] == 0
+        and r["accent_coverage_after_lock"] >= GOAL_ACCENT_COVERAGE
+        and (r["accent_median_offset_ms"] or 1e9) <= GOAL_ACCENT_OFFSET_MS
+        and (r["loop_ms"]["p99"] or 1e9) <= GOAL_LOOP_P99_MS
+        for r in rows
+    ]
+    return {
+        "benchmark": "live_dance",
+        "what": "quaddance live --from-file, --robot sim, shipped policy, real time",
+        "goals": {
+            "lock_within_s": GOAL_LOCK_S,
+            "accent_coverage_at_least": GOAL_ACCENT_COVERAGE,
+            "accent_median_offset_ms_at_most": GOAL_ACCENT_OFFSET_MS,
+            "loop_p99_ms_at_most": GOAL_LOOP_P99_MS,
+            "falls": 0,
+            "songs_meeting_all": f"{sum(ok)}/{len(rows)}",
+        },
+        "songs": rows,
+    }
+
+
+def machine_info() -> dict[str, Any]:
+    """What the figures were measured on, and how busy it was (1-minute load average)."""
+    import os
+    import platform
+
+    return {
+        "cpu": platform.processor() or platform.machine(),
+        "cpu_count": os.cpu_count(),
+        "python": platform.python_version(),
+        "load_1min": round(os.getloadavg()[0], 2),
+    }

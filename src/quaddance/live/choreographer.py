@@ -1,0 +1,206 @@
+"""On-the-fly choreography: the dance is planned a bar ahead on the beat grid that the online
+tracker predicts, and streamed as robot targets (paws and trunk) at the policy rate.
+
+The offline choreographer does the choosing (`choreo.choreographer.choreograph`,
+`choreo.body.choreograph_body`) on a small `MusicGrid` of the predicted beats of the next
+segment (one to two bars, ending on a downbeat), and the offline target rules make it
+feasible (`targets.robot_targets`, `targets.feasible_body_targets`), so a live dance is made
+of the same moves as a planned one. Segments overlap by `TAIL_BEATS`: a lift or gesture on
+the last beat finishes in the next segment's time (paws: the higher target; trunk:
+cross-faded). Without a stable lock the robot holds a calm standing pose.
+
+Rows are committed up to `planned_until_step` only (what follows is a tail that the next
+segment may still change); `LOOKAHEAD_S` keeps them ahead of the dance, preview included.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from quaddance.choreo.body import choreograph_body, plan_body
+from quaddance.choreo.choreographer import choreograph
+from quaddance.choreo.grid import MusicGrid
+from quaddance.targets import TargetConfig, feasible_body_targets, robot_targets
+
+#: Committed targets reach at least this far past the song's "now", s: the policy's preview
+#: (0.4 s) plus the audio-to-command latency, with margin.
+LOOKAHEAD_S = 1.0
+#: Rate at which the human dance is rendered before it becomes robot targets (CHOREO_FPS).
+HUMAN_FPS = 60.0
+#: Beats each segment runs past its end, for lifts and gestures that land on its last beat.
+TAIL_BEATS = 1.0
+#: Loudness history the choreographer reads, s: "loud" means loud for this song so far.
+ENERGY_HISTORY_S = 20.0
+ENERGY_FPS = 10.0
+#: Length of a calm (no lock) chunk, s.
+CALM_CHUNK_S = 0.5
+BEATS_PER_BAR = 4
+
+
+@dataclass
+class Segment:
+    """A planned stretch of the dance, for logs and the viewer."""
+
+    start_s: float
+    end_s: float
+    tempo_bpm: float
+    move: str  # the trunk's move at its start ("calm" without a lock)
+
+
+class LiveChoreographer:
+    """Turns tracker states into a growing (T, 8) array of targets from song time 0 at
+    ``policy_hz``: paw targets (FL, FR, RL, RR, m) then body targets (`BODY_COLUMNS`)."""
+
+    def __init__(
+        self,
+        policy_hz: float,
+        target_cfg: TargetConfig | None = None,
+        seed: int = 0,
+        style: str = "mixed",
+    ) -> None:
+        self.hz = float(policy_hz)
+        self.cfg = dataclasses.replace(target_cfg or TargetConfig(), out_fps=self.hz)
+        self.seed = int(seed)
+        self.style = style
+        self.rows = np.zeros((0, 8))
+        self.planned_until_step = 0  # rows before this are final
+        self.segments: list[Segment] = []
+        self._energy: list[tuple[float, float]] = []  # (song s, 0..1)
+
+    # --- input -------------------------------------------------------------------------------
+    def update(self, state, now_s: float) -> int:
+        """Plan as far as needed for song time ``now_s`` given tracker ``state`` (duck-typed
+        `music.online_beats.TrackerState`). Returns the number of final rows."""
+        if np.isfinite(state.energy):
+            self._energy.append((now_s, float(state.energy)))
+        locked = bool(state.locked) and state.beat_period_s > 0 and np.isfinite(state.next_beat_s)
+        bar_s = BEATS_PER_BAR * state.beat_period_s if locked else 0.0
+        while self.planned_until_step / self.hz < now_s + LOOKAHEAD_S + bar_s:
+            if locked:
+                self._plan_bar(state)
+            else:
+                self._calm(CALM_CHUNK_S)
+        return self.planned_until_step
+
+    @property
+    def current_move(self) -> str:
+        return self.segments[-1].move if self.segments else "calm"
+
+    def move_at(self, t_s: float) -> str:
+        """The move danced at song time ``t_s``."""
+        for seg in reversed(self.segments):
+            if seg.start_s <= t_s:
+                return seg.move
+        return "calm"
+
+    def final_rows(self, start: int) -> np.ndarray:
+        """Final rows from index ``start`` on (those not yet handed out)."""
+        return self.rows[start : self.planned_until_step]
+
+    # --- planning ----------------------------------------------------------------------------
+    def _calm(self, chunk_s: float) -> None:
+        start = self.planned_until_step
+        n = max(1, round(chunk_s * self.hz))
+        self._write(start, np.zeros((n, 8)))
+        self.planned_until_step = start + n
+        if not self.segments or self.segments[-1].move != "calm":
+            self.segments.append(Segment(start / self.hz, (start + n) / self.hz, 0.0, "calm"))
+        else:
+            self.segments[-1].end_s = (start + n) / self.hz
+
+    def _predicted_beats(
+        self, state, start_s: float, end_s: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Predicted beat times in [start_s, end_s) and their positions in the bar."""
+        period = state.beat_period_s
+        k0 = int(np.floor((start_s - state.next_beat_s) / period))
+        k = np.arange(k0, k0 + int((end_s - start_s) / period) + 3)
+        times = state.next_beat_s + k * period
+        in_bar = (state.next_beat_in_bar + k) % BEATS_PER_BAR
+        keep = (times >= start_s - 1e-9) & (times < end_s - 1e-9)
+        return times[keep], in_bar[keep]
+
+    def _plan_bar(self, state) -> None:
+        period = state.beat_period_s
+        start_step = self.planned_until_step
+        start_s = start_step / self.hz
+        # The segment's beats: from half a beat after its start (the beat at the start
+        # belongs to the previous segment) to the first predicted downbeat at least a bar
+        # away, which opens the next segment.
+        beats, in_bar = self._predicted_beats(
+            state, start_s + 0.5 * period, start_s + 3 * BEATS_PER_BAR * period
+        )
+        later = beats[(in_bar == 0) & (beats >= start_s + BEATS_PER_BAR * period - 1e-6)]
+        end_s = float(later[0]) if later.size else start_s + (BEATS_PER_BAR + 0.5) * period
+        seg = beats < end_s - 1e-6
+        seg_beats, seg_in_bar = beats[seg], in_bar[seg]
+        # The grid starts ENERGY_HISTORY_S earlier (on a policy step), so that its loudness
+        # envelope can say how loud this bar is for the song so far.
+        origin_step = max(0, start_step - round(ENERGY_HISTORY_S * self.hz))
+        origin_s = origin_step / self.hz
+        duration_s = end_s + TAIL_BEATS * period - origin_s
+        grid = MusicGrid(
+            duration_s=duration_s,
+            beats_s=seg_beats - origin_s,
+            downbeats_s=seg_beats[seg_in_bar == 0] - origin_s,
+            energy=self._energy_envelope(origin_s, duration_s, state.energy),
+            energy_fps=ENERGY_FPS,
+            sections_s=np.zeros(0),
+        )
+        seed = self.seed + len(self.segments)
+        feet = choreograph(grid, seed=seed, fps=HUMAN_FPS, style=self.style)
+        _, paws = robot_targets(feet, HUMAN_FPS, grid.beats_s, self.cfg)
+        body_human = choreograph_body(grid, feet, HUMAN_FPS, seed=seed, style=self.style)
+        t_out = np.arange(paws.shape[0]) / self.hz
+        body, _ = feasible_body_targets(body_human, HUMAN_FPS, t_out, paws)
+        rows = np.concatenate([paws, body], axis=1)[start_step - origin_step :]
+        _drop_cut_lifts(rows)
+        self._write(start_step, rows, fade_steps=round(period * self.hz))
+        # Final up to the segment's last beat: its lift falls, and the next segment's first
+        # lift rises, in the overlap that the next plan blends.
+        commit_s = max(start_s + 1.0 / self.hz, end_s - period)
+        self.planned_until_step = min(round(commit_s * self.hz), self.rows.shape[0])
+        plan = plan_body(grid, seed=seed, style=self.style)
+        move = plan[0][1].name if plan else "hold"
+        self.segments.append(Segment(start_s, commit_s, 60.0 / period, move))
+
+    def _energy_envelope(self, origin_s: float, duration_s: float, now: float) -> np.ndarray:
+        n = max(2, int(np.ceil(duration_s * ENERGY_FPS)))
+        t = origin_s + np.arange(n) / ENERGY_FPS
+        if not self._energy:
+            return np.full(n, now)
+        hist_t, hist_e = np.array(self._energy).T
+        # The future is assumed as loud as now; the past is what the tracker measured.
+        return np.interp(t, np.append(hist_t, t[-1] + 1.0), np.append(hist_e, now))
+
+    def _write(self, start: int, new: np.ndarray, fade_steps: int = 0) -> None:
+        """Put ``new`` rows at ``start``. Over an earlier plan's tail the paws take the
+        higher target; the trunk cross-fades from the old plan (or, past its end, from the
+        last final pose held) to the new one over at least ``fade_steps``, so it never
+        jumps."""
+        have = self.rows.shape[0]
+        n_fade = min(new.shape[0], max(fade_steps, have - start))
+        if n_fade > 0:
+            last = self.rows[start - 1] if start > 0 else np.zeros(8)
+            old = np.tile(last, (n_fade, 1))
+            old[:, :4] = 0.0  # paws beyond an old tail are down
+            n_old = max(0, min(have - start, n_fade))
+            old[:n_old] = self.rows[start : start + n_old]
+            w = (np.arange(1, n_fade + 1) / (n_fade + 1))[:, None]
+            new = new.copy()
+            new[:n_fade, :4] = np.maximum(old[:, :4], new[:n_fade, :4])
+            new[:n_fade, 4:] = (1 - w) * old[:, 4:] + w * new[:n_fade, 4:]
+        self.rows = np.concatenate([self.rows[:start], new], axis=0)
+
+
+def _drop_cut_lifts(rows: np.ndarray, eps_m: float = 1e-3) -> None:
+    """Zero, in place, a front-paw lift already under way at the first row (its rise was
+    planned before the segment and cut off): the paw stays down until that lift would end."""
+    for k in (0, 1):
+        if rows.shape[0] and rows[0, k] > eps_m:
+            down = np.flatnonzero(rows[:, k] <= eps_m)
+            end = int(down[0]) if down.size else rows.shape[0]
+            rows[:end, k] = 0.0

@@ -1,0 +1,662 @@
+"""Online (causal) beat, tempo, downbeat and energy tracking for ``quaddance live``.
+
+The tracker sees the audio block by block and never looks ahead. Per 11.6 ms frame (hop 256 at
+22.05 kHz) it computes, from a 46 ms window that ends at the newest sample:
+
+1. Onset envelopes, as in the offline analyser (``music/analysis.py``) but with causal
+   normalisation (running means instead of centred ones): mel dB flux plus kick/bass-band flux
+   for the tempo, mel dB flux plus treble flux for placing beats.
+2. Tempo, every 0.25 s: the harmonic autocorrelation salience of the last ``TEMPO_WINDOW_S`` of
+   the tempo envelope (the same "lag whose multiples line up" score and log-normal prior as the
+   offline analyser, which prefers the true tempo to half tempo in the dance range), followed
+   by an online Viterbi filter over a log-tempo grid: tempo drifts cheaply and jumps at a fixed
+   cost; a recent-weighted window lets a tempo change win within a few seconds, and the beat
+   score is then recomputed on the new period so the beats move onto the new grid at once.
+3. Beat phase with a cumulative beat score (Ellis' dynamic program run forwards, as in Stark's
+   real-time BTrack): each frame scores its onset plus the best score one beat period back.
+   Half-way between beats the score is projected one period ahead and the next beat is
+   predicted; a beat is reported as soon as the audio reaches its predicted time, so reporting
+   is at most one block late (``LATENCY_S``) and the motion can be planned on ``next_beat_s``.
+4. Lock: a beat is "supported" when the onset envelope peaks near it; the tracker is locked
+   when most of the last beats (``LOCK_SUPPORT`` of at least ``LOCK_BEATS`` beats spanning
+   ``LOCK_SPAN_S``) were supported at a steady tempo, and unlocks after ``UNLOCK_MISSES``
+   unsupported beats in a row or when the music stops (``SILENCE_RESET_S`` of silence also
+   resets the tempo and phase, so a restart is found afresh).
+5. Downbeats (4/4): the bar position whose beats carry the most kick/bass-band onsets over
+   the last bars, with hysteresis.
+6. Energy: RMS mapped to [0, 1] by the 5th and 95th percentiles of the last 30 s (the offline
+   choreographer's ``normalized_energy``, causally), smoothed over about 1 s.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from quaddance.music.audio import DEFAULT_SR
+
+SR_HZ = DEFAULT_SR
+"""Sample rate the tracker runs at, Hz (sources resample to it)."""
+
+HOP = 256
+"""Samples per onset frame (11.6 ms at 22.05 kHz)."""
+
+N_FFT = 1024
+"""Analysis window, samples (46 ms): long enough for the kick band, short for low latency."""
+
+FRAME_S = HOP / SR_HZ
+"""Onset frame period, seconds."""
+
+BLOCK_S = HOP / SR_HZ
+"""Default audio block of the live sources, seconds (one frame)."""
+
+LATENCY_S = 0.025
+"""A beat is reported at most this long after it happens, for blocks of at most this length
+(the default block is 11.6 ms): beats are predicted half a beat ahead and reported by the first
+``update`` whose block ends at or after the predicted time."""
+
+WINDOW_DELAY_S = (N_FFT / 2) / SR_HZ
+"""An onset shows in the flux when it reaches the middle of the window: onset frame times are
+the window centres, this much before the newest sample."""
+
+N_MELS = 64
+LOW_BAND_HZ = 160.0
+"""Kick/bass band upper edge, Hz (as the offline analyser)."""
+HIGH_BAND_HZ = 3000.0
+"""Treble band lower edge, Hz: snare noise, hats and cymbals."""
+CHORD_BAND_HZ = (200.0, 2000.0)
+"""Band where chord changes are looked for (downbeats), Hz."""
+
+MIN_BPM, MAX_BPM = 55.0, 215.0
+"""Tempo search range, BPM: the dance range 60-200 with a margin for the Viterbi grid."""
+PRIOR_CENTER_BPM = 120.0
+PRIOR_SIGMA_OCTAVES = 1.2
+"""Log-normal tempo prior: the offline analyser's (centre of the dance range 80-160 BPM)."""
+TEMPO_HARMONICS = 4
+TEMPO_WINDOW_S = 8.0
+"""Autocorrelation window of the tempo estimate, seconds."""
+MIN_TEMPO_WINDOW_S = 2.0
+"""No tempo (and no beats) before this much music has been heard, seconds."""
+TEMPO_HOP_S = 0.25
+"""Tempo estimate period, seconds."""
+TEMPO_GRID_STEP = 0.01
+"""Log-tempo grid step (natural log units: 1 %)."""
+TEMPO_DRIFT_STEPS = 2.0
+"""Tempo drifts by about this many grid steps (2 %) per tempo hop at no great cost."""
+TEMPO_JUMP_COST = 3.0
+"""Cost of a tempo jump, in units of one hop of the clearest evidence (offline analyser's)."""
+
+REBUILD_TEMPO_RATIO = 1.05
+"""A tempo change larger than this ratio recomputes the cumulative beat score ..."""
+REBUILD_S = 4.0
+"""... over the last this many seconds."""
+CUMSCORE_ALPHA = 0.9
+"""Weight of the past in the cumulative beat score (BTrack's)."""
+TIGHTNESS = 5.0
+"""Width of the log-Gaussian weight on beat intervals off the period (BTrack's)."""
+
+LOCK_BEATS = 3
+"""Supported beats at a steady tempo needed for a lock ..."""
+LOCK_SPAN_S = 1.5
+"""... spanning at least this long (4 beats at 120 BPM, 3 at 60 BPM)."""
+LOCK_MIN_WINDOW_BEATS = 4
+LOCK_SUPPORT = 0.75
+"""Fraction of the beats (at least the last ``LOCK_MIN_WINDOW_BEATS``) that must be supported
+for a lock."""
+SUPPORT_RATIO = 1.4
+"""A beat is supported when its onset peak is this many times the period's mean onset."""
+UNLOCK_MISSES = 4
+"""Unsupported beats in a row that lose the lock (a break without drums keeps it a while)."""
+STEADY_TEMPO_RATIO = 1.04
+"""Tempo counts as steady when it stays within this ratio over the lock's beats."""
+
+SILENCE_DB = -50.0
+"""Frames quieter than this, dB relative to the running loudness peak, are silence."""
+SILENCE_ABS_RMS = 1e-4
+"""... and frames below this RMS (-80 dBFS) always are."""
+SILENCE_RESET_S = 1.5
+"""Silence this long loses the lock and resets tempo and phase, seconds (longer than the
+gap between clicks at the slowest tempo)."""
+
+BEATS_PER_BAR = 4
+BAR_EVIDENCE_DECAY = 0.95
+"""Per-beat decay of the downbeat evidence (a memory of about 5 bars)."""
+BAR_SWITCH_RATIO = 1.25
+"""Another bar phase takes over when its evidence is this many times the current one's."""
+ENERGY_HISTORY_S = 30.0
+ENERGY_SMOOTH_S = 1.0
+
+
+@dataclass(frozen=True)
+class BeatEvent:
+    """A beat, reported once the audio has reached it.
+
+    Attributes:
+        time_s: when the beat happens, song seconds.
+        reported_s: song time of the end of the block that reported it (``<= time_s +
+            LATENCY_S`` for blocks no longer than ``LATENCY_S``).
+        index: beats counted since the tracker last (re)started.
+        beat_in_bar: 0 for a downbeat, then 1, 2, 3.
+        tempo_bpm: tempo when the beat was reported.
+        locked: whether the tracker was locked.
+        confidence: 0..1, see ``TrackerState.confidence``.
+    """
+
+    time_s: float
+    reported_s: float
+    index: int
+    beat_in_bar: int
+    tempo_bpm: float
+    locked: bool
+    confidence: float
+
+    @property
+    def downbeat(self) -> bool:
+        return self.beat_in_bar == 0
+
+
+@dataclass(frozen=True)
+class TrackerState:
+    """What the tracker believes now.
+
+    Attributes:
+        time_s: song time of the newest sample seen.
+        tempo_bpm: current tempo, BPM (0 before any tempo estimate).
+        beat_period_s: 60 / tempo_bpm, seconds (0 before any tempo estimate).
+        locked: a stable lock (see the module's docstring, item 4).
+        confidence: 0..1, the fraction of the last ``LOCK_BEATS`` beats that were supported.
+        next_beat_s: predicted time of the next beat, song seconds (NaN when none is known).
+        next_beat_in_bar: position of that beat in its bar, 0 = downbeat.
+        last_beat_s: time of the last beat reported, song seconds (NaN before any).
+        energy: loudness, 0..1 (normalised RMS, smoothed).
+        silent: the input is silent now.
+        lock_s: song time of the first stable lock (NaN before it).
+    """
+
+    time_s: float
+    tempo_bpm: float
+    beat_period_s: float
+    locked: bool
+    confidence: float
+    next_beat_s: float
+    next_beat_in_bar: int
+    last_beat_s: float
+    energy: float
+    silent: bool
+    lock_s: float
+
+    @property
+    def beat_phase(self) -> float:
+        """Fraction (0..1) of the current beat that has passed (NaN before the first beat)."""
+        if not (np.isfinite(self.last_beat_s) and self.beat_period_s > 0):
+            return float("nan")
+        return float(np.clip((self.time_s - self.last_beat_s) / self.beat_period_s, 0.0, 1.0))
+
+    @property
+    def next_downbeat_s(self) -> float:
+        """Predicted time of the next downbeat, song seconds (NaN when no beat is predicted)."""
+        if not np.isfinite(self.next_beat_s):
+            return float("nan")
+        beats_to_go = (BEATS_PER_BAR - self.next_beat_in_bar) % BEATS_PER_BAR
+        return self.next_beat_s + beats_to_go * self.beat_period_s
+
+
+def _autocorrelation(x: np.ndarray, max_lag: int, demean: bool = True) -> np.ndarray:
+    """(max_lag + 1,) autocorrelation divided by the overlap length, lag 0 scaled to 1."""
+    if demean:
+        x = x - x.mean()
+    spec = np.fft.rfft(x, 2 * len(x))
+    ac = np.fft.irfft(np.abs(spec) ** 2)[: max_lag + 1]
+    ac /= np.maximum(len(x) - np.arange(max_lag + 1), 1)
+    return ac / max(float(ac[0]), 1e-12)
+
+
+class _Ema:
+    """Exponential moving average with a time constant in frames."""
+
+    def __init__(self, tau_frames: float, value: float = 0.0) -> None:
+        self.k = 1.0 - np.exp(-1.0 / max(tau_frames, 1e-9))
+        self.value = value
+        self.started = False
+
+    def __call__(self, x: float) -> float:
+        if not self.started:
+            self.value, self.started = x, True
+        else:
+            self.value += self.k * (x - self.value)
+        return self.value
+
+
+class _Features:
+    """Causal framing, mel spectrum and the two normalised onset envelopes."""
+
+    def __init__(self) -> None:
+        import librosa  # lazy: the CLI's --help must stay fast
+
+        self.window = np.hanning(N_FFT + 1)[:-1]
+        mel_fb = librosa.filters.mel(sr=SR_HZ, n_fft=N_FFT, n_mels=N_MELS, fmax=SR_HZ / 2)
+        # float64 like the spectrum: a mixed-precision matmul leaves BLAS for a slow loop.
+        self.mel_fb_t = np.ascontiguousarray(mel_fb.T, dtype=np.float64)
+        mel_hz = librosa.mel_frequencies(n_mels=N_MELS + 2, fmax=SR_HZ / 2)[1:-1]
+        self.low = mel_hz <= LOW_BAND_HZ
+        self.high = mel_hz >= HIGH_BAND_HZ
+        self.chord_bands = (mel_hz >= CHORD_BAND_HZ[0]) & (mel_hz <= CHORD_BAND_HZ[1])
+        self.tail = np.zeros(N_FFT - HOP, dtype=np.float32)
+        self.pending = np.zeros(0, dtype=np.float32)
+        self.ref_power = 0.0
+        self.prev_db: np.ndarray | None = None
+        self.prev_log: np.ndarray | None = None
+        fps = 1.0 / FRAME_S
+        self.mean_full = _Ema(5.0 * fps)
+        self.mean_high = _Ema(5.0 * fps)
+        self.norm = {k: (_Ema(0.25 * fps), _Ema(3.0 * fps), _Ema(30.0 * fps)) for k in "tb"}
+        # The loudness reference decays by 6 dB per 10 s, so a song that gets quieter keeps its
+        # 80 dB onset range, while one loud hit does not deafen the tracker for long.
+        self.ref_decay = 10 ** (-0.6 * FRAME_S / 10.0)
+
+    def push(self, samples: np.ndarray) -> list[tuple[float, float, float, float, np.ndarray]]:
+        """Add samples; return (tempo_onset, beat_onset, low_onset, rms, mel dB (N_MELS,)) for
+        each new frame."""
+        self.pending = np.concatenate([self.pending, samples])
+        n_frames = len(self.pending) // HOP
+        if n_frames == 0:
+            return []
+        used = n_frames * HOP
+        audio = np.concatenate([self.tail, self.pending[:used]])
+        self.pending = self.pending[used:]
+        self.tail = audio[-(N_FFT - HOP) :]
+        idx = np.arange(n_frames)[:, None] * HOP + np.arange(N_FFT)[None, :]
+        frames = audio[idx].astype(np.float64)
+        rms = np.sqrt(np.mean(frames**2, axis=1))
+        power = np.abs(np.fft.rfft(frames * self.window, axis=1)) ** 2
+        mel = power @ self.mel_fb_t  # (n_frames, n_mels)
+        out = []
+        for i in range(n_frames):
+            out.append((*self._onsets(mel[i]), float(rms[i]), self.prev_db))
+        return out
+
+    def _onsets(self, mel: np.ndarray) -> tuple[float, float, float]:
+        self.ref_power = max(self.ref_power * self.ref_decay, float(mel.max()), 1e-10)
+        db = 10.0 * np.log10(np.maximum(mel, self.ref_power * 1e-8) / self.ref_power)
+        log = np.log1p(1e5 * mel / self.ref_power)
+        if self.prev_db is None or self.prev_log is None:
+            self.prev_db, self.prev_log = db, log
+        flux_db = np.maximum(0.0, db - self.prev_db)
+        flux_log = np.maximum(0.0, log - self.prev_log)
+        self.prev_db, self.prev_log = db, log
+        full = float(flux_db.mean())
+        low = float(flux_db[self.low].mean())
+        high = float(flux_log[self.high].mean())
+        tempo = self._normalise("t", full + low)
+        beat_raw = full / max(self.mean_full(full), 1e-6) + high / max(self.mean_high(high), 1e-6)
+        beat = self._normalise("b", beat_raw)
+        return tempo, beat, low
+
+    def _normalise(self, key: str, x: float) -> float:
+        """Remove the slow floor, divide by the local level (3 s); the floor on the divisor
+        (a tenth of the 30 s level) keeps quiet passages quiet."""
+        floor, level, long = self.norm[key]
+        x = max(0.0, x - floor(x))
+        lvl = level(x)
+        return x / max(lvl, 0.1 * long(x), 1e-6)
+
+
+class OnlineBeatTracker:
+    """Causal beat, tempo, downbeat and energy tracker; feed it audio with ``update``.
+
+    Args:
+        sr_hz: sample rate of the blocks given to ``update``; must be ``SR_HZ`` (the sources
+            resample to it).
+    """
+
+    def __init__(self, sr_hz: int = SR_HZ) -> None:
+        if sr_hz != SR_HZ:
+            raise ValueError(f"OnlineBeatTracker runs at {SR_HZ} Hz, got blocks at {sr_hz} Hz")
+        self._feats = _Features()
+        fps = 1.0 / FRAME_S
+        self._fps = fps
+        self._n_frames = 0  # frames processed since the start
+        self._time_s = 0.0
+        # Tempo grid (log spaced) and its online Viterbi filter.
+        self._log_bpm = np.arange(np.log(MIN_BPM), np.log(MAX_BPM), TEMPO_GRID_STEP)
+        steps = np.arange(len(self._log_bpm))
+        drift = -0.5 * ((steps[:, None] - steps[None, :]) / TEMPO_DRIFT_STEPS) ** 2
+        self._trans = np.maximum(drift, -TEMPO_JUMP_COST)
+        z = (self._log_bpm - np.log(PRIOR_CENTER_BPM)) / np.log(2.0) / PRIOR_SIGMA_OCTAVES
+        self._prior = np.exp(-0.5 * z * z)
+        self._tempo_hop = max(1, round(TEMPO_HOP_S * fps))
+        hist = round(TEMPO_WINDOW_S * fps)
+        self._hist_len = hist
+        # Energy.
+        self._rms_hist = np.zeros(0)
+        self._rms_range: tuple[float, float] | None = None  # 5th, 95th percentile of RMS
+        self._rms_hist_every = max(1, round(0.1 * fps))
+        self._energy = _Ema(ENERGY_SMOOTH_S * fps)
+        self._peak_rms = 0.0
+        self._lock_s = float("nan")
+        self._weights_period = 0.0  # period of the cached _best_past weights
+        self._lags = np.zeros(0, dtype=int)
+        self._weights = np.zeros(0)
+        self._silent_frames = 0  # silent frames in a row
+        self._reset_tracking()
+
+    # --- public ----------------------------------------------------------------------------
+
+    def update(self, block: np.ndarray, t_end_s: float) -> list[BeatEvent]:
+        """Process the next audio block; return the beats whose time the audio has reached.
+
+        Args:
+            block: (n,) mono samples at ``SR_HZ`` (float; any n >= 0).
+            t_end_s: song time of the end of the block, seconds.
+
+        Returns:
+            The beats with ``time_s <= t_end_s`` not reported before, in time order.
+        """
+        block = np.asarray(block, dtype=np.float32).reshape(-1)
+        self._time_s = t_end_s
+        new = self._feats.push(block)
+        # Samples short of a whole frame wait in ``pending``: the newest frame ends before them.
+        frames_end_s = t_end_s - len(self._feats.pending) / SR_HZ
+        for k, (tempo_o, beat_o, low_o, rms, mel_db) in enumerate(new):
+            # Onsets show when they reach the window centre: frame time = centre time.
+            frame_t = frames_end_s - (len(new) - 1 - k) * FRAME_S - WINDOW_DELAY_S
+            self._frame(tempo_o, beat_o, low_o, rms, mel_db, frame_t)
+        events = []
+        while self._scheduled and self._scheduled[0] <= t_end_s:
+            events.append(self._emit(self._scheduled.pop(0), t_end_s))
+        return events
+
+    @property
+    def state(self) -> TrackerState:
+        """A snapshot of what the tracker believes now."""
+        period_s = self._period * FRAME_S if self._period > 0 else 0.0
+        next_s = self._scheduled[0] if self._scheduled else float("nan")
+        if not self._scheduled and period_s > 0 and np.isfinite(self._last_beat_s):
+            # Between a beat and the next prediction (made half a beat later): one period on.
+            next_s = self._last_beat_s + period_s
+        return TrackerState(
+            time_s=self._time_s,
+            tempo_bpm=60.0 / period_s if period_s > 0 else 0.0,
+            beat_period_s=period_s,
+            locked=self._locked,
+            confidence=self._confidence(),
+            next_beat_s=next_s,
+            next_beat_in_bar=self._beat_in_bar(self._beat_index),
+            last_beat_s=self._last_beat_s,
+            energy=float(self._energy.value),
+            silent=self._silent_frames >= round(SILENCE_RESET_S * self._fps),
+            lock_s=self._lock_s,
+        )
+
+    # --- per frame ---------------------------------------------------------------------------
+
+    def _reset_tracking(self) -> None:
+        """Forget tempo, phase, lock and bar position (at start and after silence)."""
+        self._onset_t: list[float] = []  # tempo onset history (last TEMPO_WINDOW_S)
+        self._onset_b: list[float] = []  # beat onset history, aligned with _cum
+        self._low: list[float] = []
+        self._mel: list[np.ndarray] = []  # mel spectrum per frame, dB
+        self._pending_bar: list[int] = []  # frames of reported beats not yet in the bar count
+        self._beats_counted = 0
+        self._mean_low = _Ema(2 * BEATS_PER_BAR)  # per-beat means that scale the two cues
+        self._mean_change = _Ema(2 * BEATS_PER_BAR)
+        self._cum: list[float] = []
+        self._hist_start = self._n_frames  # frame number of the first history entry
+        self._viterbi: np.ndarray | None = None
+        self._period = 0.0  # beat period, frames (0 = unknown)
+        self._period_at_beats: list[float] = []
+        self._m0 = -1  # frames to the next beat prediction
+        self._scheduled: list[float] = []  # predicted beat times not yet reported, s
+        self._pending_support: list[int] = []  # frames of beats not yet scored
+        self._support: list[bool] = []
+        self._beat_index = 0
+        self._bar_evidence = np.zeros(BEATS_PER_BAR)
+        self._bar_phase = 0  # index (mod 4) of the beats that are downbeats
+        self._locked = False
+        self._misses = 0
+        self._last_beat_s = float("nan")
+        self._heard_frames = 0
+
+    def _frame(
+        self,
+        tempo_o: float,
+        beat_o: float,
+        low_o: float,
+        rms: float,
+        mel_db: np.ndarray,
+        t_s: float,
+    ) -> None:
+        self._n_frames += 1
+        self._update_energy(rms)
+        reset_frames = round(SILENCE_RESET_S * self._fps)
+        if self._is_silent(rms):
+            self._silent_frames += 1
+            if self._silent_frames == reset_frames:
+                self._reset_tracking()
+            if self._silent_frames >= reset_frames:
+                self._hist_start = self._n_frames  # the history restarts after the silence
+                return
+        else:
+            self._silent_frames = 0
+        self._heard_frames += 1
+        self._push_history(tempo_o, beat_o, low_o, mel_db)
+        if self._heard_frames % self._tempo_hop == 0:
+            self._update_tempo()
+        if self._period <= 0:
+            return
+        self._check_support()
+        self._count_bar()
+        self._m0 -= 1
+        if self._m0 <= 0:
+            self._predict_beat(t_s)
+
+    def _is_silent(self, rms: float) -> bool:
+        self._peak_rms = max(self._peak_rms * self._feats.ref_decay, rms)
+        return rms < max(SILENCE_ABS_RMS, self._peak_rms * 10 ** (SILENCE_DB / 20))
+
+    def _update_energy(self, rms: float) -> None:
+        if self._n_frames % self._rms_hist_every == 0:
+            keep = round(ENERGY_HISTORY_S * self._fps / self._rms_hist_every)
+            self._rms_hist = np.append(self._rms_hist[-keep + 1 :], rms)
+            if len(self._rms_hist) >= 10:
+                self._rms_range = tuple(np.percentile(self._rms_hist, [5.0, 95.0]))
+        if self._rms_range is None:
+            self._energy(0.5 if rms > SILENCE_ABS_RMS else 0.0)
+            return
+        lo, hi = self._rms_range
+        self._energy(float(np.clip((rms - lo) / max(hi - lo, 1e-9), 0.0, 1.0)))
+
+    def _push_history(
+        self, tempo_o: float, beat_o: float, low_o: float, mel_db: np.ndarray
+    ) -> None:
+        p = self._period
+        cum = (1.0 - CUMSCORE_ALPHA) * beat_o
+        if p > 0 and len(self._cum) > p / 2:
+            prev = np.asarray(self._cum[-(round(2 * p) + 1) :])  # only the window is needed
+            cum += CUMSCORE_ALPHA * self._best_past(prev, len(prev))
+        self._onset_t.append(tempo_o)
+        self._onset_b.append(beat_o)
+        self._low.append(low_o)
+        self._mel.append(mel_db)
+        self._cum.append(cum)
+        excess = len(self._cum) - self._hist_len
+        if excess > 0:
+            for h in (self._onset_t, self._onset_b, self._low, self._mel, self._cum):
+                del h[:excess]
+            self._hist_start += excess
+
+    def _best_past(self, cum: np.ndarray, end: int) -> float:
+        """The best cumulative score 2 periods to half a period before index ``end``, each
+        weighted by how far that interval is from one period (log-Gaussian, BTrack's)."""
+        if self._weights_period != self._period:  # cached: called for every frame
+            lags = np.arange(round(2 * self._period), round(self._period / 2) - 1, -1)
+            self._lags = lags[lags >= 1]  # frames back, far to near
+            self._weights = np.exp(-0.5 * (TIGHTNESS * np.log(self._lags / self._period)) ** 2)
+            self._weights_period = self._period
+        lags, weights = self._lags, self._weights
+        if end >= lags[0]:  # the usual case: the whole window exists, a contiguous slice
+            return float(np.max(cum[end - lags[0] : end - lags[-1] + 1] * weights))
+        ok = lags <= end
+        return float(np.max(cum[end - lags[ok]] * weights[ok])) if ok.any() else 0.0
+
+    def _update_tempo(self) -> None:
+        onset = np.asarray(self._onset_t)
+        if len(onset) < MIN_TEMPO_WINDOW_S * self._fps:
+            return
+        periods = 60.0 * self._fps / np.exp(self._log_bpm)
+        max_lag = min(len(onset) - 1, int(TEMPO_HARMONICS * periods.max()) + 2)
+        # Recent music weighs more (a rising half-Hann window over TEMPO_WINDOW_S, by the age
+        # of each frame, so that a short history at the start is weighed almost evenly), so
+        # that a tempo change shows within a few seconds; dividing by the window's own
+        # autocorrelation removes its pull towards short lags.
+        window = np.hanning(2 * self._hist_len + 1)[1 : self._hist_len + 1][-len(onset) :]
+        ac = _autocorrelation((onset - onset.mean()) * window, max_lag)
+        ac /= np.maximum(_autocorrelation(window, max_lag, demean=False), 0.05)
+        sal = np.zeros(len(periods))
+        count = np.zeros(len(periods))
+        lags = np.arange(max_lag + 1)
+        for k in range(1, TEMPO_HARMONICS + 1):
+            ok = k * periods <= max_lag
+            sal[ok] += np.interp(k * periods[ok], lags, ac)
+            count[ok] += 1
+        sal = sal / np.maximum(count, 1) * self._prior
+        emis = sal / max(float(np.abs(sal).max()), 1e-9)
+        if self._viterbi is None:
+            self._viterbi = emis
+        else:
+            self._viterbi = np.max(self._viterbi[:, None] + self._trans, axis=0) + emis
+            self._viterbi -= self._viterbi.max()
+        best = int(np.argmax(self._viterbi))
+        old_period, self._period = self._period, float(periods[best])
+        if old_period <= 0:
+            self._rebuild_cumscore()  # the history so far was scored without a period
+            self._m0 = 1  # predict the first beat now
+        elif abs(np.log(self._period / old_period)) > np.log(REBUILD_TEMPO_RATIO):
+            self._rebuild_cumscore()
+
+    def _rebuild_cumscore(self) -> None:
+        """Recompute the cumulative beat score over the history with the new period: scores
+        built on the old period would keep the beats on the old grid for several beats."""
+        onset = np.asarray(self._onset_b)
+        cum = np.asarray(self._cum, dtype=float)
+        # Only the last REBUILD_S: the score forgets older beats anyway (alpha^k), and the
+        # rebuild must stay a small fraction of the live loop's 20 ms.
+        for i in range(max(0, len(onset) - round(REBUILD_S * self._fps)), len(onset)):
+            cum[i] = (1.0 - CUMSCORE_ALPHA) * onset[i]
+            if i > self._period / 2:
+                cum[i] += CUMSCORE_ALPHA * self._best_past(cum, i)
+        self._cum = cum.tolist()
+
+    def _predict_beat(self, now_t_s: float) -> None:
+        """Project the cumulative score one period ahead and schedule the next beat there
+        (BTrack's prediction, made half-way between beats)."""
+        p = self._period
+        n_future = max(1, round(p))
+        cum = np.asarray(self._cum, dtype=float)
+        future = np.concatenate([cum, np.zeros(n_future)])
+        n = len(cum)
+        for i in range(n, n + n_future):
+            future[i] = CUMSCORE_ALPHA * self._best_past(future, i)
+        v = np.arange(1, n_future + 1)
+        weight = np.exp(-0.5 * ((v - p / 2) / (p / 2)) ** 2)
+        ahead = int(np.argmax(future[n:] * weight)) + 1  # frames after the newest frame
+        beat_s = now_t_s + ahead * FRAME_S
+        self._scheduled.append(beat_s)
+        self._pending_support.append(self._n_frames + ahead)
+        self._pending_bar.append(self._n_frames + ahead)
+        self._m0 = ahead + round(p / 2)
+
+    def _check_support(self) -> None:
+        """Score beats whose neighbourhood (+-35 ms) has been heard: supported or not."""
+        radius = 3
+        cum_end = self._hist_start + len(self._onset_b)  # frame number after the newest
+        while self._pending_support and self._pending_support[0] + radius <= cum_end:
+            frame = self._pending_support.pop(0)
+            i = frame - self._hist_start - 1
+            onset = np.asarray(self._onset_b)
+            lo = max(0, i - radius)
+            if i + radius >= len(onset) or lo >= len(onset):
+                continue
+            near = float(onset[lo : i + radius + 1].max())
+            start = max(0, i - round(self._period))
+            level = float(onset[start : i + radius + 1].mean())
+            supported = near > SUPPORT_RATIO * level and near > 0.0
+            self._support.append(supported)
+            self._period_at_beats.append(self._period)
+            self._update_lock(supported)
+
+    def _count_bar(self) -> None:
+        """Downbeat evidence for beats heard up to one period after them: the kick/bass onset
+        at the beat plus the change of the spectrum (chords change on beat 1) from the beat
+        before to the beat after, each divided by its recent mean (the offline analyser's
+        bass onsets + chord changes; the mel spectrum stands in for chroma)."""
+        period = max(1, round(self._period))
+        newest = self._hist_start + len(self._mel)  # frame number of the newest frame
+        while self._pending_bar and self._pending_bar[0] + period <= newest:
+            beat = self._pending_bar.pop(0) - self._hist_start - 1  # history index
+            index = self._beats_counted
+            self._beats_counted += 1
+            if beat - period < 0:
+                continue
+            low = max(self._low[max(0, beat - 3) : beat + 4])
+            # Medians over the frames of a beat skip the drum hits and keep what sustains
+            # (chords, bass); only the bands where chords lie count.
+            mid = self._feats.chord_bands
+            before = np.median(np.asarray(self._mel[beat - period : beat])[:, mid], axis=0)
+            after = np.median(np.asarray(self._mel[beat : beat + period])[:, mid], axis=0)
+            change = float(np.mean(np.abs(after - before)))  # dB
+            evidence = low / max(self._mean_low(low), 1e-9)
+            evidence += change / max(self._mean_change(change), 1e-9)
+            self._add_bar_evidence(evidence, index)
+
+    def _add_bar_evidence(self, evidence: float, index: int) -> None:
+        """Leaky per-position sums (about 5 bars) of the downbeat evidence."""
+        pos = index % BEATS_PER_BAR
+        self._bar_evidence *= BAR_EVIDENCE_DECAY
+        self._bar_evidence[pos] += evidence
+        # Hysteresis: the bar phase moves only when another phase is clearly stronger, so
+        # that the count does not flicker where kicks fall on beats 1 and 3 alike.
+        best = int(np.argmax(self._bar_evidence))
+        if self._bar_evidence[best] > BAR_SWITCH_RATIO * self._bar_evidence[self._bar_phase]:
+            self._bar_phase = best
+
+    def _update_lock(self, supported: bool) -> None:
+        self._misses = 0 if supported else self._misses + 1
+        need = max(LOCK_BEATS, 1 + int(np.ceil(LOCK_SPAN_S / (self._period * FRAME_S) - 1e-9)))
+        need = max(need, LOCK_MIN_WINDOW_BEATS)
+        recent = self._support[-need:]
+        periods = self._period_at_beats[-need:]
+        steady = max(periods) / max(min(periods), 1e-9) <= STEADY_TEMPO_RATIO
+        if not self._locked:
+            # Most, not all, beats must be supported: some styles leave one beat of the bar
+            # empty (beat 3 of a clave pattern).
+            if len(recent) == need and np.mean(recent) >= LOCK_SUPPORT and recent[-1] and steady:
+                self._locked = True
+                if not np.isfinite(self._lock_s):
+                    self._lock_s = self._time_s
+        elif self._misses >= UNLOCK_MISSES or (
+            max(periods) / max(min(periods), 1e-9) > 1.25 and not all(recent[-2:])
+        ):
+            self._locked = False
+
+    def _confidence(self) -> float:
+        recent = self._support[-LOCK_BEATS:]
+        return float(np.mean(recent)) if recent else 0.0
+
+    def _beat_in_bar(self, index: int) -> int:
+        return (index - self._bar_phase) % BEATS_PER_BAR
+
+    def _emit(self, beat_s: float, now_s: float) -> BeatEvent:
+        self._beat_index += 1
+        self._last_beat_s = beat_s
+        period_s = self._period * FRAME_S
+        return BeatEvent(
+            time_s=beat_s,
+            reported_s=now_s,
+            index=self._beat_index,
+            beat_in_bar=self._beat_in_bar(self._beat_index - 1),
+            tempo_bpm=60.0 / period_s if period_s > 0 else 0.0,
+            locked=self._locked,
+            confidence=self._confidence(),
+        )

@@ -1,0 +1,141 @@
+"""`quaddance live`: the on-the-fly choreographer, and the command end to end on the
+simulated robot with a song fed at real-time pace."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import soundfile as sf
+
+from quaddance.choreo.accents import beat_coverage, motion_accents_s
+from quaddance.live.choreographer import LOOKAHEAD_S, LiveChoreographer
+from quaddance.targets import TargetConfig
+
+HZ = 50.0
+
+
+def _state(now_s: float, locked: bool, period_s: float = 0.5, phase_s: float = 0.1):
+    """A tracker state with a steady grid: beats at phase_s + k * period_s."""
+    k_next = np.floor((now_s - phase_s) / period_s) + 1
+    return SimpleNamespace(
+        energy=0.8,
+        locked=locked,
+        beat_period_s=period_s if locked else 0.0,
+        next_beat_s=phase_s + k_next * period_s if locked else float("nan"),
+        next_beat_in_bar=int(k_next) % 4,
+    )
+
+
+def _run(lock_from_s: float, duration_s: float, period_of=lambda t: 0.5) -> LiveChoreographer:
+    lc = LiveChoreographer(HZ, seed=3)
+    for i in range(round(duration_s / 0.05)):
+        now = i * 0.05
+        n = lc.update(_state(now, now >= lock_from_s, period_of(now)), now)
+        assert n / HZ >= now + LOOKAHEAD_S  # final targets always ahead of the music
+    return lc
+
+
+def test_calm_without_a_lock():
+    lc = _run(lock_from_s=1e9, duration_s=5.0)
+    assert np.all(lc.rows[: lc.planned_until_step] == 0.0)
+    assert lc.current_move == "calm"
+
+
+def test_dance_after_lock_is_smooth_feasible_and_on_the_beat():
+    lc = _run(lock_from_s=3.0, duration_s=30.0)
+    rows = lc.rows[: lc.planned_until_step]
+    t = np.arange(rows.shape[0]) / HZ
+    cfg = TargetConfig()
+    assert np.all(rows[t < 3.0] == 0.0)  # calm until the lock
+    assert rows[:, :2].max() > 0.05 and np.ptp(rows[:, 4:], axis=0).min() > 0.01
+    assert rows[:, :2].max() <= cfg.max_height_m + 1e-9
+    assert np.all(rows[:, 2:4] == 0.0)  # rear feet down
+    # No jumps at segment seams: paws within their speed bound, trunk within 2.5 rad/s.
+    step = np.abs(np.diff(rows, axis=0))
+    assert step[:, :2].max() <= cfg.max_speed_m_s / HZ * 1.05
+    assert step[:, 5:].max() <= 2.5 / HZ
+    beats = 0.1 + 0.5 * np.arange(80)
+    after = beats[(beats > 5.0) & (beats < t[-1] - 1.0)]
+    coverage = beat_coverage(motion_accents_s(t, rows[:, :4], rows[:, 4:]), after)
+    assert coverage >= 0.7
+    assert {s.move for s in lc.segments} - {"calm"}  # real moves were chosen
+
+
+def test_a_tempo_change_is_followed_bar_by_bar():
+    lc = _run(lock_from_s=2.0, duration_s=24.0, period_of=lambda t: 0.5 if t < 12 else 0.4)
+    tempos = [(s.start_s, s.tempo_bpm) for s in lc.segments if s.move != "calm"]
+    assert any(abs(bpm - 120) < 1 for t, bpm in tempos if t < 10)
+    assert all(abs(bpm - 150) < 1 for t, bpm in tempos if t > 14)
+
+
+@pytest.fixture(scope="module")
+def song(tmp_path_factory) -> Path:
+    from quaddance.music.synth import render_song
+
+    path = tmp_path_factory.mktemp("live") / "song.wav"
+    y, _ = render_song(120.0, 9.0, seed=11)
+    sf.write(path, y, 22050)
+    return path
+
+
+def _live(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "quaddance.cli", "live", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+
+
+def test_live_from_file_dances_in_real_time(song, tmp_path):
+    from quaddance.play.rollout import ROLLOUT_KEYS
+
+    t0 = time.monotonic()
+    proc = _live("--from-file", str(song), "--out", str(tmp_path))
+    wall_s = time.monotonic() - t0
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert wall_s >= 9.0  # the song is fed at real-time pace, never faster
+    live = json.loads((tmp_path / "live.json").read_text())
+    assert live["duration_s"] == pytest.approx(9.0, abs=0.1)
+    assert live["falls"] == 0 and live["final_state"] == "done"
+    assert live["lock_s"] is not None and live["lock_s"] < 6.0
+    beats = np.asarray(live["beats_s"])
+    assert beats.size >= 6 and np.all(np.diff(beats) > 0.2)
+    locked = [p["bpm"] for p in live["tempo_bpm"] if p["locked"]]
+    assert locked and min(abs(b - 120) for b in locked) < 3  # 120 BPM (or its octave)
+    assert live["latency_ms"]["p50"] is not None and live["latency_ms"]["p50"] < 100
+    assert live["loop_ms"]["p99"] is not None
+    with np.load(tmp_path / "rollout.npz") as z:
+        assert set(z.files) == set(ROLLOUT_KEYS)
+        assert z["time_s"].size == pytest.approx(9.0 * HZ, abs=3)
+        assert z["beats_s"].size == beats.size
+
+
+def test_live_errors_are_one_line(tmp_path, song):
+    proc = _live("--video", "--out", str(tmp_path), timeout=60)
+    assert proc.returncode == 2 and "--video needs --from-file" in proc.stderr
+    assert "Traceback" not in proc.stderr
+    proc = _live("--from-file", str(tmp_path / "nope.wav"), "--out", str(tmp_path), timeout=60)
+    assert proc.returncode == 2 and "nope.wav" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_microphone_without_a_sound_card_is_one_line(tmp_path):
+    try:
+        import sounddevice as sd
+
+        if any(d["max_input_channels"] > 0 for d in sd.query_devices()):
+            pytest.skip("this machine has an audio input: the error path cannot be shown")
+    except OSError:
+        pass  # PortAudio missing: the command must say so in one line
+    proc = _live("--seconds", "2", "--out", str(tmp_path), timeout=120)
+    assert proc.returncode == 2, proc.stderr[-2000:]
+    lines = [ln for ln in proc.stderr.splitlines() if "error" in ln]
+    assert len(lines) == 1 and "audio input" in lines[0]
+    assert "Traceback" not in proc.stderr

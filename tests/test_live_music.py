@@ -1,0 +1,318 @@
+"""Live music in: the audio sources (file at real-time pace, microphone) and the online beat
+tracker (lock, tempo, re-lock after a tempo change, silence, downbeats, latency)."""
+
+from __future__ import annotations
+
+import importlib.abc
+import sys
+import threading
+import time
+import types
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import soundfile as sf
+
+from quaddance.errors import InputFileError, QuaddanceError
+from quaddance.music.audio import load_audio
+from quaddance.music.live import ArraySource, FileSource, MicSource
+from quaddance.music.online_beats import (
+    BLOCK_S,
+    LATENCY_S,
+    SILENCE_RESET_S,
+    SR_HZ,
+    BeatEvent,
+    OnlineBeatTracker,
+)
+
+HIT_WINDOW_S = 0.07
+"""Beats count as right within +-70 ms (the F-measure window)."""
+
+
+def _click_track(
+    segments: list[tuple[float, float]], sr: int = SR_HZ, start_s: float = 0.5
+) -> tuple[np.ndarray, np.ndarray]:
+    """Clicks at (tempo_bpm, seconds) segments, one after the other; tempo 0 = silence.
+
+    Every fourth click is a louder, lower one (a downbeat). Returns (audio, click times s).
+    """
+    total_s = start_s + sum(d for _, d in segments)
+    y = np.zeros(round(total_s * sr), dtype=np.float32)
+    t = np.arange(round(0.03 * sr)) / sr
+    high = np.sin(2 * np.pi * 1500 * t) * np.exp(-t / 0.005)
+    low = np.sin(2 * np.pi * 150 * t) * np.exp(-t / 0.02)
+    beats: list[float] = []
+    seg_start_s = start_s
+    for bpm, dur_s in segments:
+        if bpm > 0:
+            beats += list(np.arange(seg_start_s, seg_start_s + dur_s - 1e-6, 60.0 / bpm))
+        seg_start_s += dur_s
+    for k, b in enumerate(beats):
+        click = 0.8 * low + 0.5 * high if k % 4 == 0 else 0.5 * high
+        i = round(b * sr)
+        n = min(len(click), len(y) - i)
+        y[i : i + n] += click[:n].astype(np.float32)
+    return y, np.asarray(beats)
+
+
+def _track(
+    y: np.ndarray, block_s: float = BLOCK_S
+) -> tuple[list[BeatEvent], list[tuple[float, bool, float]], OnlineBeatTracker]:
+    tracker = OnlineBeatTracker()
+    events: list[BeatEvent] = []
+    locks: list[tuple[float, bool, float]] = []  # (song time, locked, tempo BPM)
+    for block in ArraySource(y, SR_HZ, block_s=block_s):
+        events += tracker.update(block.samples, block.t_end_s)
+        locks.append((block.t_end_s, tracker.state.locked, tracker.state.tempo_bpm))
+    return events, locks, tracker
+
+
+def _first_lock_s(locks: list[tuple[float, bool, float]], after_s: float = 0.0) -> float:
+    return next((t for t, locked, _ in locks if locked and t >= after_s), np.inf)
+
+
+def _errors_s(events: list[BeatEvent], ref_s: np.ndarray, t0_s: float, t1_s: float) -> np.ndarray:
+    est = np.array([e.time_s for e in events if t0_s <= e.time_s <= t1_s])
+    return np.array([np.min(np.abs(ref_s - t)) for t in est])
+
+
+def _write_wav(path: Path, y: np.ndarray, sr: int = SR_HZ) -> Path:
+    sf.write(str(path), y, sr, subtype="FLOAT")
+    return path
+
+
+# --- sources ----------------------------------------------------------------------------------
+
+
+def test_file_source_is_not_faster_than_real_time(tmp_path: Path) -> None:
+    y, _ = _click_track([(120.0, 2.5)])
+    source = FileSource(_write_wav(tmp_path / "clicks.wav", y))
+    start = time.monotonic()
+    for block in source:
+        if block.t_end_s >= 1.0:
+            break
+    # A lower bound on the behaviour (it waits for the wall clock), not a speed requirement.
+    assert time.monotonic() - start >= 0.95
+
+
+def test_file_source_without_pacing_yields_the_files_samples(tmp_path: Path) -> None:
+    y, _ = _click_track([(90.0, 3.0)], sr=44100)
+    path = _write_wav(tmp_path / "clicks.wav", y, sr=44100)  # resampled like load_audio does
+    blocks = list(FileSource(path, realtime=False))
+    expected, sr = load_audio(path, sr=SR_HZ)
+    assert all(b.sr_hz == sr for b in blocks)
+    np.testing.assert_array_equal(np.concatenate([b.samples for b in blocks]), expected)
+    starts = np.array([b.t_start_s for b in blocks])
+    np.testing.assert_allclose(starts[1:], [b.t_end_s for b in blocks[:-1]])
+    assert blocks[0].t_start_s == 0.0
+
+
+def test_file_source_refuses_bad_files_like_every_command(tmp_path: Path) -> None:
+    with pytest.raises(InputFileError, match="no such file"):
+        FileSource(tmp_path / "missing.wav")
+    (tmp_path / "notes.txt").write_text("not audio")
+    with pytest.raises(InputFileError, match="unsupported file type"):
+        FileSource(tmp_path / "notes.txt")
+
+
+class _NoPortAudio(importlib.abc.MetaPathFinder):
+    """Makes ``import sounddevice`` fail as it does where libportaudio is missing."""
+
+    def find_spec(self, name: str, path: object, target: object = None) -> None:
+        if name == "sounddevice":
+            raise OSError("PortAudio library not found")
+        return None
+
+
+def test_mic_source_without_portaudio_is_one_clear_line(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delitem(sys.modules, "sounddevice", raising=False)
+    monkeypatch.setattr(sys, "meta_path", [_NoPortAudio(), *sys.meta_path])
+    with pytest.raises(QuaddanceError) as err:
+        MicSource()
+    msg = str(err.value)
+    assert msg.startswith("no audio input device: PortAudio is not installed")
+    assert "libportaudio2" in msg and "\n" not in msg
+
+
+def test_mic_source_without_a_device_is_one_clear_line(monkeypatch: pytest.MonkeyPatch) -> None:
+    try:
+        sd = pytest.importorskip("sounddevice")
+    except OSError:  # importorskip only skips ImportError; no PortAudio is the test above
+        pytest.skip("PortAudio is not installed")
+
+    def no_device(*args: object, **kwargs: object) -> object:
+        if kwargs.get("kind") == "input":
+            raise sd.PortAudioError("Error querying device -1")
+        return []
+
+    monkeypatch.setattr(sd, "query_devices", no_device)
+    with pytest.raises(QuaddanceError) as err:
+        MicSource()
+    msg = str(err.value)
+    assert msg.startswith("no audio input device: the default input: Error querying device -1")
+    assert "\n" not in msg
+
+
+class _FakeSoundDevice(types.ModuleType):
+    """sounddevice with one 48 kHz stereo microphone that records a 440 Hz tone (or nothing)."""
+
+    class PortAudioError(Exception):
+        pass
+
+    def __init__(self, silent: bool = False) -> None:
+        super().__init__("sounddevice")
+        self.silent = silent
+        self.device = {"name": "Fake Mic", "max_input_channels": 2, "default_samplerate": 48e3}
+
+    def query_devices(self, device: object = None, kind: str | None = None) -> object:
+        return self.device if kind == "input" else [self.device]
+
+    def check_input_settings(self, samplerate: float = 0.0, **kwargs: object) -> None:
+        if samplerate != self.device["default_samplerate"]:
+            raise self.PortAudioError("Invalid sample rate")
+
+    def InputStream(self, **kwargs: object) -> object:  # noqa: N802 (sounddevice's name)
+        return _FakeStream(silent=self.silent, **kwargs)
+
+
+class _FakeStream:
+    def __init__(
+        self, silent: bool, samplerate: int, blocksize: int, callback: Any, **kw: object
+    ) -> None:
+        self.sr = samplerate
+        self.blocksize = blocksize
+        self.callback = callback
+        self.silent = silent
+        self.running = False
+
+    def start(self) -> None:
+        self.running = True
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        n = 0
+        while self.running and not self.silent and n < 2 * self.sr:  # 2 s of audio
+            t = (n + np.arange(self.blocksize)) / self.sr
+            tone = 0.5 * np.sin(2 * np.pi * 440.0 * t)
+            self.callback(
+                np.stack([tone, tone], axis=1).astype(np.float32), self.blocksize, None, None
+            )
+            n += self.blocksize
+
+    def stop(self) -> None:
+        self.running = False
+
+    def close(self) -> None:
+        self.running = False
+
+
+def test_mic_source_records_resamples_and_counts_song_time(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "sounddevice", _FakeSoundDevice())
+    blocks = []
+    with MicSource() as mic:
+        assert mic.device_name == "Fake Mic"
+        for block in mic:
+            blocks.append(block)
+            if block.t_end_s >= 1.0:
+                break
+    assert all(b.sr_hz == SR_HZ for b in blocks)
+    np.testing.assert_allclose([b.t_start_s for b in blocks[1:]], [b.t_end_s for b in blocks[:-1]])
+    y = np.concatenate([b.samples for b in blocks])[SR_HZ // 10 :]  # past the resampler's start
+    assert np.sqrt(np.mean(y**2)) == pytest.approx(0.5 / np.sqrt(2), rel=0.05)  # the tone
+
+
+def test_mic_source_that_stops_delivering_is_an_error(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "sounddevice", _FakeSoundDevice(silent=True))
+    monkeypatch.setattr("quaddance.music.live.MIC_STALL_S", 0.2)
+    with MicSource() as mic, pytest.raises(QuaddanceError, match="Fake Mic: no audio for"):
+        next(iter(mic))
+
+
+# --- the online tracker -----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("bpm", "block_s"), [(120.0, BLOCK_S), (90.0, BLOCK_S), (120.0, 512 / SR_HZ)]
+)
+def test_tracker_locks_on_a_click_track_within_6_s(bpm: float, block_s: float) -> None:
+    y, ref = _click_track([(bpm, 14.0)])
+    events, locks, tracker = _track(y, block_s)
+    lock_s = _first_lock_s(locks)
+    assert lock_s <= 6.0
+    errors = _errors_s(events, ref, lock_s, ref[-1])
+    assert len(errors) >= round((ref[-1] - lock_s) * bpm / 60.0) - 1  # no beat left out
+    assert errors.max() <= HIT_WINDOW_S
+    assert tracker.state.tempo_bpm == pytest.approx(bpm, rel=0.02)
+    assert tracker.state.locked and tracker.state.lock_s == pytest.approx(lock_s, abs=0.02)
+    # Beats are reported as soon as the audio reaches them, never later than LATENCY_S.
+    assert all(0.0 <= e.reported_s - e.time_s <= LATENCY_S for e in events)
+
+
+def test_tracker_predicts_the_next_beat_and_downbeat() -> None:
+    y, ref = _click_track([(120.0, 12.0)])
+    tracker = OnlineBeatTracker()
+    predictions: list[tuple[float, float]] = []  # (predicted next beat, next downbeat)
+    downbeats: list[float] = []
+    for block in ArraySource(y, SR_HZ):
+        events = tracker.update(block.samples, block.t_end_s)
+        downbeats += [e.time_s for e in events if e.downbeat and e.locked]
+        state = tracker.state
+        if state.locked and block.t_end_s > 8.0 and not predictions:
+            predictions.append((state.next_beat_s, state.next_downbeat_s))
+    next_beat_s, next_downbeat_s = predictions[0]
+    assert np.min(np.abs(ref - next_beat_s)) <= HIT_WINDOW_S
+    # Every fourth click is the loud low one: the downbeats are found among the beats.
+    true_downbeats = ref[::4]
+    assert np.min(np.abs(true_downbeats - next_downbeat_s)) <= HIT_WINDOW_S
+    late = [t for t in downbeats if 8.0 < t <= ref[-1]]
+    assert late and all(np.min(np.abs(true_downbeats - t)) <= HIT_WINDOW_S for t in late)
+    assert 0.0 <= tracker.state.energy <= 1.0
+
+
+def test_tracker_relocks_after_a_tempo_change() -> None:
+    y, ref = _click_track([(100.0, 10.0), (132.0, 14.0)])
+    change_s = 10.5
+    events, locks, tracker = _track(y)
+    assert _first_lock_s(locks) <= 6.0
+    # Locked on the new tempo within a few seconds of the change, then on the new beats.
+    relock_s = min(t for t, locked, bpm in locks if t > change_s and locked and bpm > 128.0)
+    assert relock_s - change_s <= 8.0
+    assert tracker.state.tempo_bpm == pytest.approx(132.0, rel=0.02)
+    errors = _errors_s(events, ref, change_s + 8.0, ref[-1])
+    assert len(errors) >= 8 and errors.max() <= HIT_WINDOW_S
+
+
+def test_tracker_loses_lock_in_silence_and_finds_the_music_again() -> None:
+    silence_s = 3.0
+    y, ref = _click_track([(120.0, 10.0), (0.0, silence_s), (90.0, 10.0)])
+    music_stops_s, music_returns_s = 10.5, 10.5 + silence_s
+    events, locks, _ = _track(y)
+    assert _first_lock_s(locks) <= 6.0
+    # Unlocked once the silence has lasted SILENCE_RESET_S, and no beats in the silence after.
+    gone_s = music_stops_s + SILENCE_RESET_S + 0.1
+    assert not any(locked for t, locked, _ in locks if gone_s <= t <= music_returns_s)
+    assert not [e for e in events if gone_s <= e.time_s <= music_returns_s]
+    # Found again within 6 s of the music coming back, at the new tempo.
+    relock_s = _first_lock_s(locks, after_s=music_returns_s)
+    assert relock_s - music_returns_s <= 6.0
+    errors = _errors_s(events, ref, relock_s, ref[-1])
+    assert len(errors) >= 4 and errors.max() <= HIT_WINDOW_S
+
+
+def test_tracker_stays_unlocked_in_silence_and_noise() -> None:
+    rng = np.random.default_rng(0)
+    y = np.concatenate(
+        [np.zeros(3 * SR_HZ), 0.1 * rng.standard_normal(6 * SR_HZ)]  # silence, then hiss
+    ).astype(np.float32)
+    events, locks, tracker = _track(y)
+    assert not any(locked for _, locked, _ in locks)
+    assert not [e for e in events if e.time_s < 3.0]
+    assert np.isnan(tracker.state.lock_s)
+
+
+def test_tracker_rejects_another_sample_rate() -> None:
+    with pytest.raises(ValueError, match="22050"):
+        OnlineBeatTracker(sr_hz=44100)
