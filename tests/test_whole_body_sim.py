@@ -181,3 +181,38 @@ def test_dance_takes_style_and_moves_files(tmp_path):
     )
     assert proc.returncode == 2 and "moves.toml" in proc.stderr
     assert "Traceback" not in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_bench_body_reach_measures_what_the_feedforward_holds(tmp_path):
+    """`bench body-reach`: four feet down the feed-forward alone holds the trunk's height and
+    roll over a range; on three legs it cannot balance (that is the policy's job); a paws-only
+    policy is refused by --policy."""
+    import subprocess
+    import sys
+
+    out = tmp_path / "body_reach.json"
+    cmd = [sys.executable, "-m", "quaddance.cli", "bench", "body-reach", "--out", str(out)]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    res = json.loads(out.read_text())
+    lo, hi = res["four_feet"]["height_offset_m"]
+    assert lo <= -0.03 and hi >= 0.03
+    assert res["four_feet"]["roll_rad"][1] >= 0.2
+    assert res["paw_up"]["roll_rad"] == [0.0, 0.0]
+    held = [t for t in res["trials"]["four_feet"] if t["held"]]
+    assert all(abs(t["achieved"] - t["amplitude"]) <= 0.35 * abs(t["amplitude"]) for t in held)
+    policy = _shipped_policy()
+    proc = subprocess.run(
+        [*cmd, "--policy", str(policy.onnx_path)], capture_output=True, text=True, timeout=900
+    )
+    if policy.task.whole_body:  # the policy balances on top of the feed-forward
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        assert policy.onnx_path.name in json.loads(out.read_text())["what"]
+    else:
+        assert proc.returncode == 2 and "not a whole-body policy" in proc.stderr
+
+
+def _shipped_policy():
+    from quaddance.play.policy import OnnxPolicy, shipped_policy_path
+
+    return OnnxPolicy.load(shipped_policy_path())

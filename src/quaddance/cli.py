@@ -246,6 +246,19 @@ def _print_clamp_report(dance: Any) -> None:
     Console().print(table)
 
 
+# Options that several commands share, defined once.
+PolicyOpt = Annotated[
+    Path | None, typer.Option(help="Policy .onnx (its .json beside it); default: shipped.")
+]
+RobotOpt = Annotated[
+    str, typer.Option(help="sim (a simulated Go1 in another process) or go1 (a real one).")
+]
+RobotIpOpt = Annotated[str, typer.Option(help="go1: the robot's low-level IP.")]
+PowerLevelOpt = Annotated[
+    int, typer.Option(help="go1: SDK PowerProtect level, 1 (10 %) to 10.", min=1, max=10)
+]
+
+
 # --- training --------------------------------------------------------------------------------
 
 
@@ -375,9 +388,7 @@ def dance_cmd(
     motion: Annotated[
         Path | None, typer.Option(help="Human motion (EDGE/AIST++ .pkl, .bvh) instead of ours.")
     ] = None,
-    policy: Annotated[
-        Path | None, typer.Option(help="Policy .onnx (its .json beside it); default: shipped.")
-    ] = None,
+    policy: PolicyOpt = None,
     mode: Annotated[str, typer.Option(help="Targets: feasible, paper or minmax.")] = "feasible",
     seed: Annotated[int, typer.Option(help="Choreographer seed.", **SeedRange)] = 0,
     out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")] = Path("dance_out"),
@@ -467,12 +478,8 @@ def deploy_cmd(
     motion: Annotated[
         Path | None, typer.Option(help="Human motion (EDGE/AIST++ .pkl, .bvh) to dance.")
     ] = None,
-    robot: Annotated[
-        str, typer.Option(help="sim (a simulated Go1 in another process) or go1 (a real one).")
-    ] = "sim",
-    policy: Annotated[
-        Path | None, typer.Option(help="Policy .onnx (its .json beside it); default: shipped.")
-    ] = None,
+    robot: RobotOpt = "sim",
+    policy: PolicyOpt = None,
     seconds: Annotated[
         float | None,
         typer.Option(help="Dance at most this long, s.", callback=finite_in(0.02, 3600.0)),
@@ -485,12 +492,8 @@ def deploy_cmd(
         typer.Option(help="Fault at dance time T, s (sim only): push@T, freeze@T, nan@T, lag@T."),
     ] = None,
     out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")] = Path("deploy_out"),
-    robot_ip: Annotated[str, typer.Option(help="go1: the robot's low-level IP.")] = (
-        "192.168.123.10"
-    ),
-    power_level: Annotated[
-        int, typer.Option(help="go1: SDK PowerProtect level, 1 (10 %) to 10.", min=1, max=10)
-    ] = 1,
+    robot_ip: RobotIpOpt = "192.168.123.10",
+    power_level: PowerLevelOpt = 1,
     sim_latency_ms: Annotated[
         tuple[float, float],
         typer.Option(
@@ -546,12 +549,8 @@ def live_cmd(
     device: Annotated[
         str | None, typer.Option(help="Microphone or line-in (sounddevice name or index).")
     ] = None,
-    robot: Annotated[
-        str, typer.Option(help="sim (a simulated Go1 in another process) or go1 (a real one).")
-    ] = "sim",
-    policy: Annotated[
-        Path | None, typer.Option(help="Policy .onnx (its .json beside it); default: shipped.")
-    ] = None,
+    robot: RobotOpt = "sim",
+    policy: PolicyOpt = None,
     seconds: Annotated[
         float | None,
         typer.Option(
@@ -572,12 +571,8 @@ def live_cmd(
     style: Annotated[str, typer.Option(help="Choreography style.")] = "mixed",
     seed: Annotated[int, typer.Option(help="Choreography seed.", **SeedRange)] = 0,
     out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")] = Path("live_out"),
-    robot_ip: Annotated[str, typer.Option(help="go1: the robot's low-level IP.")] = (
-        "192.168.123.10"
-    ),
-    power_level: Annotated[
-        int, typer.Option(help="go1: SDK PowerProtect level, 1 (10 %) to 10.", min=1, max=10)
-    ] = 1,
+    robot_ip: RobotIpOpt = "192.168.123.10",
+    power_level: PowerLevelOpt = 1,
 ) -> None:
     """Dance to music as it plays: online beat tracking, a dance planned a bar ahead, the
     robot on the wall clock (same runner and safety layer as deploy). Writes live.json,
@@ -628,9 +623,7 @@ def eval_cmd(
     report: Annotated[Path, typer.Option("--report", "-o", help="Markdown report.")] = Path(
         "report.md"
     ),
-    policy: Annotated[
-        Path | None, typer.Option(help="Policy .onnx (its .json beside it); default: shipped.")
-    ] = None,
+    policy: PolicyOpt = None,
     held_out: Annotated[
         Path | None,
         typer.Option(help="Write held-out set --set into this folder and evaluate it."),
@@ -934,9 +927,7 @@ def bench_envelope_cmd(
     report: Annotated[Path, typer.Option(help="Markdown page of the results.")] = Path(
         "docs/results/envelope.md"
     ),
-    policy: Annotated[
-        Path | None, typer.Option(help="Policy .onnx (its .json beside it); default: shipped.")
-    ] = None,
+    policy: PolicyOpt = None,
     work: Annotated[Path, typer.Option(help="Folder for the default items.")] = Path(
         "runs/heldout"
     ),
