@@ -18,3 +18,15 @@ $Q eval "${oth[@]}" --policy-output zero -o $R/eval_heldout_other_ff_only.md --t
 $Q eval "${gen[@]}" --randomize -o $R/eval_heldout_randomized.md --title "Held-out set 'generator', randomised dynamics"
 $Q eval "${oth[@]}" --randomize -o $R/eval_heldout_other_randomized.md --title "Held-out set 'other', randomised dynamics"
 $Q bench envelope "${P[@]}"
+# Songs quaddance did not make: fluidsynth renders of MIDI songs of the beat benchmark's
+# random and untuned sets (rendered into benchmarks/cache/ by `quaddance bench beats`).
+midi=()
+for n in random05_latin rock_150_backbeat fast_ska_178 slow_halftime_60 change_rock_90_to_150 bossa_136; do
+  f=$(ls benchmarks/cache/${n}-*.wav 2>/dev/null | head -1 || true)
+  [ -n "$f" ] && midi+=("$f")
+done
+if ((${#midi[@]})); then
+  $Q eval "${midi[@]}" "${P[@]}" -o $R/eval_songs_midi.md --title "Songs not made by quaddance: fluidsynth renders of MIDI songs (bench beats' random and untuned sets), nominal dynamics"
+else
+  echo "eval_results: no MIDI renders in benchmarks/cache/ (run quaddance bench beats first); skipped"
+fi

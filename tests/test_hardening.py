@@ -447,7 +447,9 @@ def test_shipped_policy_json_round_trips_unchanged() -> None:
 
     path, _ = _shipped_json()
     spec = PolicySpec.load(path)
-    assert spec.format == FORMAT and spec.obs_dim == 192 and spec.task_cfg.obs.history_len == 3
+    # The shipped policy is the whole-body dancer: 192 paw inputs + 16 body-target inputs.
+    assert spec.format == FORMAT and spec.obs_dim == 208 and spec.task_cfg.obs.history_len == 3
+    assert spec.task_cfg.whole_body
     assert spec.to_json() == path.read_text()  # byte for byte
     assert PolicySpec.from_json(spec.to_json()) == spec
 

@@ -87,7 +87,9 @@ def test_foot_height_estimate_tracks_the_truth_while_the_policy_dances():
         err.append((est - s.foot_height_m).abs().max().item())
         lifted = max(lifted, s.foot_height_m[0, 0].item())
     assert lifted > 0.12  # the foot really went up
-    assert max(err) < 0.01
+    # From the first 0.1 s on: at the very start the robot drops from its spawn height with
+    # all four feet in the air, where no "lowest foot on the floor" holds.
+    assert max(err[5:]) < 0.01
 
 
 def test_actor_terms_come_only_from_robot_sensors():

@@ -70,8 +70,10 @@ class SimRobotCfg:
     imu_tilt_noise_rad: float = 0.005  #: random small rotation of the IMU quaternion
     encoder_offset_rad: float = 0.01  #: fixed calibration error per joint, uniform +-
     foot_friction: float = 0.8  #: not training's 1.0: another floor
-    push_vel_m_s: tuple[float, float, float] = (0.0, 2.0, 0.0)  #: ``push`` fault, world frame
-    push_roll_rad_s: float = 8.0  #: ``push`` fault: roll rate added, rad/s
+    # Strong enough to topple any policy (the whole-body one rides out 2 m/s and 8 rad/s):
+    # the fault exists to show the safety layer catching a fall.
+    push_vel_m_s: tuple[float, float, float] = (0.0, 3.0, 0.0)  #: ``push`` fault, world frame
+    push_roll_rad_s: float = 16.0  #: ``push`` fault: roll rate added, rad/s
     seed: int = 0
 
     def to_json(self) -> str:
