@@ -139,3 +139,22 @@ def test_microphone_without_a_sound_card_is_one_line(tmp_path):
     lines = [ln for ln in proc.stderr.splitlines() if "error" in ln]
     assert len(lines) == 1 and "audio input" in lines[0]
     assert "Traceback" not in proc.stderr
+
+
+def test_live_with_viewer_and_video(song, tmp_path):
+    """--viewer serves the page while dancing (on a free loopback port); --video with
+    --from-file films the dance afterwards, with the song."""
+    import socket
+
+    from quaddance.play.video import video_info
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    args = ["--from-file", str(song), "--seconds", "3", "--video", "--viewer"]
+    proc = _live(*args, "--port", str(port), "--style", "calm", "--out", str(tmp_path))
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "viewer: http://127.0.0.1:" in proc.stderr.replace("\n", "")
+    info = video_info(tmp_path / "dance.mp4")
+    assert info["duration_s"] == pytest.approx(3.0, abs=0.3) and info["has_audio"]
+    assert json.loads((tmp_path / "live.json").read_text())["duration_s"] == pytest.approx(3.0)

@@ -343,15 +343,18 @@ class Trainer:
                 t1 = time.monotonic()
                 losses = self.alg.update()
                 t2 = time.monotonic()
-                self.iteration += 1
-                self.env_steps += steps * self.env.num_envs
-                self.wall_s += t2 - t0
-                row = self._curve_row(sums, steps, ep_reward, losses, t1 - t0, t2 - t1)
+                # Counters and the curve row together: a signal in between would leave a
+                # checkpoint of an iteration without its row, so it waits until both are done.
+                with _signals_deferred():
+                    self.iteration += 1
+                    self.env_steps += steps * self.env.num_envs
+                    self.wall_s += t2 - t0
+                    row = self._curve_row(sums, steps, ep_reward, losses, t1 - t0, t2 - t1)
+                    _append_csv(curve_path, row)
                 rows.append(row)
                 for k, v in row.items():
                     if k not in ("iteration",):
                         writer.add_scalar(k, v, self.iteration)
-                _append_csv(curve_path, row)
                 if bar:
                     bar.update(
                         task_id,
@@ -488,17 +491,63 @@ def policy_metadata(env, cfg: TrainCfg, trainer: Trainer | None = None) -> dict:
     }
 
 
+class _Deferral:
+    """While ``active``, a SIGINT/SIGTERM is kept in ``pending`` and acted on at the end."""
+
+    def __init__(self) -> None:
+        self.active = False
+        self.pending: tuple[int, object] | None = None
+        self.previous: dict[int, object] = {}
+
+
+_DEFER = _Deferral()
+
+
+def _act_on_signal(signum: int, frame: object) -> None:
+    """What the signal did before training took it over (the CLI's handler records it for the
+    exit status and raises), else KeyboardInterrupt: the final checkpoint gets written."""
+    previous = _DEFER.previous.get(signum)
+    if callable(previous):
+        previous(signum, frame)
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
 def _sigterm_as_interrupt():
-    """Make SIGTERM raise KeyboardInterrupt (so the final checkpoint is written); returns a
-    function that restores the previous handler."""
+    """Make SIGINT and SIGTERM raise KeyboardInterrupt (so the final checkpoint is written),
+    except inside `_signals_deferred`, which acts on them when it ends; returns a function
+    that restores the previous handlers."""
     if threading.current_thread() is not threading.main_thread():
         return lambda: None
 
     def interrupt(signum, frame):
-        raise KeyboardInterrupt(f"signal {signum}")
+        if _DEFER.active:
+            _DEFER.pending = (signum, frame)
+            return
+        _act_on_signal(signum, frame)
 
-    previous = signal.signal(signal.SIGTERM, interrupt)
-    return lambda: signal.signal(signal.SIGTERM, previous)
+    _DEFER.previous = {
+        sig: signal.signal(sig, interrupt) for sig in (signal.SIGINT, signal.SIGTERM)
+    }
+
+    def restore() -> None:
+        for sig, handler in _DEFER.previous.items():
+            signal.signal(sig, handler)
+
+    return restore
+
+
+@contextlib.contextmanager
+def _signals_deferred():
+    """A block that SIGINT and SIGTERM do not cut short: they are acted on after it."""
+    _DEFER.active = True
+    try:
+        yield
+    finally:
+        _DEFER.active = False
+        if _DEFER.pending is not None:
+            signum, frame = _DEFER.pending
+            _DEFER.pending = None
+            _act_on_signal(signum, frame)
 
 
 def _append_csv(path: Path, row: dict) -> None:
