@@ -24,7 +24,13 @@ import numpy as np
 import torch
 
 from quaddance.deploy.robot import JointCommand, Reading, Robot, realtime_priority
-from quaddance.deploy.safety import STATES, Safety, SafetyCfg, go1_joint_range_rad
+from quaddance.deploy.safety import (
+    STATES,
+    Safety,
+    SafetyCfg,
+    go1_joint_range_rad,
+    roll_pitch_rad,
+)
 from quaddance.errors import QuaddanceError
 from quaddance.play.policy import OnnxPolicy
 from quaddance.sim import go1
@@ -591,7 +597,7 @@ class Runner:
             if "rpy_rad" in truth:
                 log["rpy_true_rad"] = truth["rpy_rad"][idx]
             # How far the simulated robot's physics ran behind the wall clock (machine load).
-            self.sim_late_ms = _pcts(truth["late_s"] * 1e3)
+            self.sim_late_ms = percentiles(truth["late_s"] * 1e3)
             feet, feet_source = log["feet_true_m"], "simulator truth"
             # Training's fall (trunk on the floor, tilt, trunk too low), except that sinking
             # to the floor under damping after a stop is the plan: only toppling counts then.
@@ -633,8 +639,8 @@ class Runner:
             "events": events,
             "front": front,
             "rear_lift_mean_m": rear,
-            "tick_ms": _pcts(work),
-            "period_ms": _pcts(period),
+            "tick_ms": percentiles(work),
+            "period_ms": percentiles(period),
             "feet_source": feet_source,
             "guards": self.safety.counts.to_json(),
             "overrun_ticks": overruns,
@@ -717,7 +723,7 @@ def _append(
         rows[k].append(np.array(v, copy=True))
 
 
-def _pcts(values: np.ndarray) -> dict:
+def percentiles(values: np.ndarray) -> dict:
     v = np.asarray(values, dtype=float)
     v = v[np.isfinite(v)]
     if not v.size:
@@ -743,10 +749,8 @@ def rollout_from_log(log: dict[str, np.ndarray], policy_hz: float):
     if "rpy_true_rad" in log:
         rpy = log["rpy_true_rad"][dancing]
     else:
-        g = log["gravity"][dancing]
-        rpy = np.column_stack(
-            [np.arctan2(-g[:, 1], -g[:, 2]), np.arcsin(np.clip(g[:, 0], -1, 1)), 0 * g[:, 0]]
-        )
+        roll, pitch = roll_pitch_rad(log["gravity"][dancing])
+        rpy = np.column_stack([roll, pitch, np.zeros_like(roll)])
     return RolloutResult(
         fps=policy_hz,
         time_s=t,

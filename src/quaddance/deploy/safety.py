@@ -10,7 +10,6 @@ default pose -> run, damping on demand); the code is ours.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -40,10 +39,14 @@ def effort_limits_nm() -> np.ndarray:
     return np.array([go1.effort_limit_nm(n) for n in go1.JOINT_NAMES])
 
 
-def roll_pitch_rad(projected_gravity_b: np.ndarray) -> tuple[float, float]:
-    """Roll and pitch of the trunk from the unit gravity direction in its frame."""
-    gx, gy, gz = (float(v) for v in projected_gravity_b)
-    return math.atan2(-gy, -gz), math.atan2(gx, math.hypot(gy, gz))
+def roll_pitch_rad(
+    projected_gravity_b: np.ndarray,
+) -> tuple[float | np.ndarray, float | np.ndarray]:
+    """Roll and pitch of the trunk from the unit gravity direction in its frame: (3,) ->
+    two floats, (T, 3) -> two (T,) arrays."""
+    g = np.asarray(projected_gravity_b, dtype=np.float64)
+    gx, gy, gz = g[..., 0], g[..., 1], g[..., 2]
+    return np.arctan2(-gy, -gz), np.arctan2(gx, np.hypot(gy, gz))
 
 
 @dataclass(frozen=True)

@@ -92,9 +92,6 @@ def _listen(spec: dict, out: Any, go: Any, stop: Any) -> None:
         choreo = LiveChoreographer(
             spec["policy_hz"], TargetConfig(**spec["target_cfg"]), spec["seed"], spec["style"]
         )
-        # Warm up numpy/librosa paths so the first real block is not slow.
-        tracker_warm = OnlineBeatTracker()
-        tracker_warm.update(np.zeros(4096, np.float32), 4096 / 22050)
     except QuaddanceError as err:
         out.put(("error", str(err)))
         return
@@ -208,7 +205,13 @@ class _LiveFeed:
 def run_live(job: LiveJob, status=lambda msg: None) -> tuple[dict, dict[str, Path]]:
     """Run `quaddance live`; returns (live.json contents, output paths)."""
     from quaddance.deploy.job import DeployJob, make_robot
-    from quaddance.deploy.runner import DeployOptions, Runner, rollout_from_log, write_outputs
+    from quaddance.deploy.runner import (
+        DeployOptions,
+        Runner,
+        percentiles,
+        rollout_from_log,
+        write_outputs,
+    )
     from quaddance.fileio import check_output_file, ensure_dir, write_json
     from quaddance.play.dance import target_config_for, whole_body_metrics
     from quaddance.play.policy import OnnxPolicy, shipped_policy_path
@@ -305,7 +308,7 @@ def run_live(job: LiveJob, status=lambda msg: None) -> tuple[dict, dict[str, Pat
         ],
         "beats_s": [round(b, 4) for b in feed.beats_s],
         "downbeats_s": [round(b, 4) for b in feed.downbeats_s],
-        "latency_ms": _pcts(np.asarray(feed.latency_s) * 1e3),
+        "latency_ms": percentiles(np.asarray(feed.latency_s) * 1e3),
         "tracker_latency_ms": _tracker_latency_ms(),
         "loop_ms": result.summary.get("tick_ms"),
         "falls": result.summary.get("falls"),
@@ -352,16 +355,6 @@ def _tracker_latency_ms() -> float:
     from quaddance.music.online_beats import LATENCY_S
 
     return round(LATENCY_S * 1e3, 1)
-
-
-def _pcts(values: np.ndarray) -> dict:
-    v = values[np.isfinite(values)]
-    if not v.size:
-        return {"p50": None, "p99": None}
-    return {
-        "p50": round(float(np.percentile(v, 50)), 2),
-        "p99": round(float(np.percentile(v, 99)), 2),
-    }
 
 
 def _video(path: Path, rollout, log: dict, song: Path) -> Path:
