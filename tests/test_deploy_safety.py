@@ -77,9 +77,16 @@ def test_stale_nan_and_tilt_checks():
     assert "NaN/Inf" in sf.check_reading(bad)
     # Roll of 0.9 rad about x (past 0.8), from the IMU quaternion.
     quat = (np.cos(0.45), np.sin(0.45), 0.0, 0.0)
-    from quaddance.deploy.runner import DanceController
+    import torch
 
-    g = DanceController.measurement(reading(2, quat=quat)).projected_gravity_b[0].numpy()
+    from quaddance.sim.observations import Measurement
+
+    r = reading(2, quat=quat)
+    t = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float32)[None]  # noqa: E731
+    meas = Measurement.from_imu(
+        t(r.quat_wxyz), t(r.gyro_rad_s), t(r.joint_pos_rad), t(r.joint_vel_rad_s)
+    )
+    g = meas.projected_gravity_b[0].numpy()
     assert "roll +0.90" in safety().check_posture(g, 0.27)
     assert safety().check_posture(np.array([0.0, 0.0, -1.0]), 0.27) is None
 

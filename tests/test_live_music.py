@@ -285,6 +285,28 @@ def test_tracker_relocks_after_a_tempo_change() -> None:
     assert len(errors) >= 8 and errors.max() <= HIT_WINDOW_S
 
 
+def test_tracker_keeps_the_beat_when_loud_off_beat_hats_come_in() -> None:
+    # The beat score follows the strongest pulse: bright hats on every off-beat, twice as loud
+    # as the clicks, that come in once the tracker is locked pull it half a beat off (disco
+    # and dembow did so). The clicks still mark the beat, so the reported beats stay on them.
+    bpm, hats_from_s = 120.0, 8.0
+    y, ref = _click_track([(bpm, 20.0)])
+    rng = np.random.default_rng(0)
+    t = np.arange(round(0.08 * SR_HZ)) / SR_HZ
+    hat = 2.0 * np.diff(rng.standard_normal(len(t)) * np.exp(-t / 0.03), prepend=0.0)
+    for mid_s in ref[:-1] + 30.0 / bpm:
+        if mid_s >= hats_from_s:
+            i = round(mid_s * SR_HZ)
+            y[i : i + len(hat)] += hat[: len(y) - i].astype(np.float32)
+    events, locks, tracker = _track(y)
+    assert _first_lock_s(locks) <= 6.0
+    errors = _errors_s(events, ref, hats_from_s + 2.0, ref[-1])
+    assert len(errors) >= round((ref[-1] - hats_from_s - 2.0) * bpm / 60.0) - 1
+    assert errors.max() <= HIT_WINDOW_S
+    assert all(locked for t, locked, _ in locks if hats_from_s <= t <= ref[-1])
+    assert tracker.state.tempo_bpm == pytest.approx(bpm, rel=0.02)
+
+
 def test_tracker_loses_lock_in_silence_and_finds_the_music_again() -> None:
     silence_s = 3.0
     y, ref = _click_track([(120.0, 10.0), (0.0, silence_s), (90.0, 10.0)])

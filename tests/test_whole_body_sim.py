@@ -63,6 +63,66 @@ def test_whole_body_actor_sees_body_targets_now_and_ahead():
         ob.build(prop, lambda k: torch.zeros(2, 4))
 
 
+def test_heading_error_is_imu_yaw_since_the_start_minus_the_target_wrapped():
+    from quaddance.sim.config import ObsCfg
+    from quaddance.sim.observations import Measurement
+
+    terms = actor_terms(3, 3, whole_body=True, heading=True)
+    assert terms[:-1] == actor_terms(3, 3, whole_body=True)
+    assert (terms[-1]["name"], terms[-1]["size"], terms[-1]["source"]) == (
+        "heading_error_rad",
+        1,
+        "dance+imu",
+    )
+    # heading is a whole-body input only
+    assert not ActorObservation(DanceTaskCfg(obs=ObsCfg(heading=True)), 1).heading
+    ob = ActorObservation(DanceTaskCfg(whole_body=True, obs=ObsCfg(heading=True)), 2)
+    assert ob.layout() == terms
+
+    def quat_yaw(yaw: float) -> list[float]:
+        return [np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)]
+
+    # The IMU reads 3.0 rad; the dance began at -3.0 rad: the robot turned 6.0 rad, which is
+    # -0.283 rad once wrapped. The targets ask for +0.1 and -0.1 rad.
+    quat = torch.tensor([quat_yaw(3.0), quat_yaw(3.0)])
+    meas = Measurement.from_imu(
+        quat,
+        torch.zeros(2, 3),
+        torch.tensor([go1.nominal_joint_pos()] * 2),
+        torch.zeros(2, 12),
+        heading_zero_rad=-3.0,
+    )
+    turned = 6.0 - 2 * np.pi
+    assert meas.heading_rad.numpy() == pytest.approx([turned] * 2, abs=1e-5)
+    prop = ob.proprio(meas, torch.zeros(2, 12))
+    body = torch.tensor([[0.0, 0.0, 0.0, 0.1], [0.0, 0.0, 0.0, -0.1]])
+    obs = ob.build(prop, lambda k: torch.zeros(2, 4), lambda k: body)
+    assert obs.shape[1] == sum(t["size"] for t in terms)
+    assert obs[:, -1].numpy() == pytest.approx([turned - 0.1, turned + 0.1], abs=1e-5)
+
+
+def test_the_robot_runner_measures_heading_from_the_dance_start():
+    from quaddance.deploy.robot import Reading
+    from quaddance.deploy.runner import DanceController
+    from quaddance.play.policy import OnnxPolicy, shipped_policy_path
+
+    def reading(yaw: float) -> Reading:
+        return Reading(
+            seq=1,
+            stamp_s=0.0,
+            quat_wxyz=np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)]),
+            gyro_rad_s=np.zeros(3),
+            joint_pos_rad=np.array(go1.nominal_joint_pos()),
+            joint_vel_rad_s=np.zeros(12),
+        )
+
+    ctrl = DanceController(
+        OnnxPolicy.load(shipped_policy_path()), np.zeros((10, 4)), np.zeros((10, 4))
+    )
+    ctrl.reset(reading(1.2))
+    assert float(ctrl.measurement(reading(1.25)).heading_rad[0]) == pytest.approx(0.05, abs=1e-5)
+
+
 def _hold_env(poses: list[tuple[float, float, float, float]], whole_body: bool):
     from quaddance.sim.task import DanceEnv
 
@@ -201,6 +261,11 @@ def test_bench_body_reach_measures_what_the_feedforward_holds(tmp_path):
     assert res["paw_up"]["roll_rad"] == [0.0, 0.0]
     held = [t for t in res["trials"]["four_feet"] if t["held"]]
     assert all(abs(t["achieved"] - t["amplitude"]) <= 0.35 * abs(t["amplitude"]) for t in held)
+    assert all(t["failed"] == [] and t["max_slide_m"] < 0.05 for t in held)
+    # Every trial not held says why; on three legs without a policy the robot falls.
+    for t in res["trials"]["four_feet"] + res["trials"]["paw_up"]:
+        assert t["held"] or t["failed"]
+    assert any("fell" in t["failed"] for t in res["trials"]["paw_up"])
     policy = _shipped_policy()
     proc = subprocess.run(
         [*cmd, "--policy", str(policy.onnx_path)], capture_output=True, text=True, timeout=900

@@ -321,7 +321,8 @@ def train_cmd(
         typer.Option(
             "--whole-body/--paws-only",
             help="Whole-body dance: the bank has body targets (trunk height, roll, pitch, "
-            "yaw), the actor sees them, rewards track them, a body feed-forward moves the legs.",
+            "yaw), the actor sees them and its heading error (IMU yaw since the start minus "
+            "the target yaw), rewards track them, a body feed-forward moves the legs.",
         ),
     ] = False,
     init_from: Annotated[
@@ -335,7 +336,7 @@ def train_cmd(
     """Train the dance policy with PPO; exports RUN_DIR/policy.onnx and policy.json."""
     from rich.console import Console
 
-    from quaddance.sim.config import DanceTaskCfg, RewardCfg
+    from quaddance.sim.config import DanceTaskCfg, ObsCfg, RewardCfg
     from quaddance.train import PRESETS, TrainCfg, train
 
     if engine not in ("cpu", "gpu"):
@@ -361,7 +362,9 @@ def train_cmd(
         checkpoint_every_s=checkpoint_every,
         max_minutes=minutes,
         init_from=init_from,
-        task=DanceTaskCfg(front_feedforward=feedforward, whole_body=whole_body),
+        task=DanceTaskCfg(
+            front_feedforward=feedforward, whole_body=whole_body, obs=ObsCfg(heading=whole_body)
+        ),
     )
     with console.status("Building the target bank (first run only) and the envs..."):
         from quaddance.fileio import ensure_dir

@@ -143,13 +143,15 @@ def build_bank(cfg: TrainCfg, progress=None) -> np.ndarray:
     return bank
 
 
-def _column_names(history_len: int, n_preview: int, whole_body: bool) -> dict[str, list[str]]:
+def _column_names(
+    history_len: int, n_preview: int, whole_body: bool, heading: bool
+) -> dict[str, list[str]]:
     """One name per observation column, actor and critic (`sim.observations` layouts)."""
     from quaddance.sim.observations import PRIVILEGED_TERMS, actor_terms
 
     actor = [
         f"{t['name']}[{i}]"
-        for t in actor_terms(history_len, n_preview, whole_body)
+        for t in actor_terms(history_len, n_preview, whole_body, heading)
         for i in range(t["size"])
     ]
     critic = actor + [f"{name}[{i}]" for name, size, _ in PRIVILEGED_TERMS for i in range(size)]
@@ -287,11 +289,13 @@ class Trainer:
                 old_task["obs"]["history_len"],
                 len(old_task["obs"]["preview_s"]),
                 bool(old_task.get("whole_body", False)),
+                bool(old_task["obs"].get("heading", False)),
             )
             ours = _column_names(
                 self.task_cfg.obs.history_len,
                 len(self.task_cfg.obs.preview_s),
                 self.task_cfg.whole_body,
+                self.task_cfg.obs.heading,
             )
             new_state = self.alg.save()
             for key, group in (("actor_state_dict", "actor"), ("critic_state_dict", "critic")):

@@ -67,7 +67,10 @@ def _run(trials: list[tuple[int, float]], paw_up: bool, policy=None) -> list[dic
     env.bank_idx[:] = torch.arange(len(trials))
     feet0 = env.robot.foot_pos_w[:, :, :2].clone()
     down = [1, 2, 3] if paw_up else [0, 1, 2, 3]
-    ok = torch.ones(len(trials), dtype=torch.bool)
+    # Why a trial failed, each check kept apart so the results say which limit was hit.
+    fell = torch.zeros(len(trials), dtype=torch.bool)
+    lifted = torch.zeros(len(trials))  # highest foot that should be down, over the hold, m
+    slid = torch.zeros(len(trials))  # farthest slide of a foot that should be down, m
     pose = torch.zeros(len(trials), 4)
     zero = torch.zeros(len(trials), 12)
     obs = env.get_observations()["actor"]
@@ -75,14 +78,14 @@ def _run(trials: list[tuple[int, float]], paw_up: bool, policy=None) -> list[dic
         action = zero if policy is None else torch.from_numpy(policy.act(obs.numpy()))
         obs_td, _, done, _ = env.step(action)
         obs = obs_td["actor"]
-        ok &= ~done
+        fell |= done
         if t == n_settle - 1:
             feet0 = env.robot.foot_pos_w[:, :, :2].clone()
         if t >= n_settle + n_ramp:
             r = env.robot
-            ok &= (r.foot_height_m[:, down] < FOOT_DOWN_M).all(dim=1)
+            lifted = torch.maximum(lifted, r.foot_height_m[:, down].amax(dim=1))
             slide = (r.foot_pos_w[:, down, :2] - feet0[:, down]).norm(dim=2).amax(dim=1)
-            ok &= slide < FOOT_SLIDE_M
+            slid = torch.maximum(slid, slide)
             pose += torch.cat(
                 [(r.base_pos_w[:, 2] - cfg.rewards.base_height_target_m)[:, None], r.base_rpy_rad],
                 dim=1,
@@ -92,8 +95,27 @@ def _run(trials: list[tuple[int, float]], paw_up: bool, policy=None) -> list[dic
     out = []
     for i, (col, amp) in enumerate(trials[1:], start=1):
         got = float(pose[i, col])
-        held = bool(ok[i]) and abs(got - amp) <= POSE_TOL * abs(amp)
-        out.append({"column": COLUMNS[col], "amplitude": amp, "achieved": got, "held": held})
+        failed = [
+            why
+            for why, bad in (
+                ("fell", bool(fell[i])),
+                ("foot lifted", float(lifted[i]) >= FOOT_DOWN_M),
+                ("foot slid", float(slid[i]) >= FOOT_SLIDE_M),
+                ("pose missed", abs(got - amp) > POSE_TOL * abs(amp)),
+            )
+            if bad
+        ]
+        out.append(
+            {
+                "column": COLUMNS[col],
+                "amplitude": amp,
+                "achieved": got,
+                "held": not failed,
+                "failed": failed,
+                "max_lift_m": float(lifted[i]),
+                "max_slide_m": float(slid[i]),
+            }
+        )
     return out
 
 

@@ -38,6 +38,7 @@ from quaddance.sim.body import BodyFeedforward
 from quaddance.sim.feedforward import FrontLiftFeedforward
 from quaddance.sim.kinematics import foot_pos_b
 from quaddance.sim.observations import ActorObservation, Measurement
+from quaddance.sim.state import yaw_from_quat
 from quaddance.sim.task import joint_targets
 
 #: Real-time priority of the runner; the simulated robot's (a separate machine's motor
@@ -85,6 +86,7 @@ class DanceController:
         )
         self.body_feedforward = BodyFeedforward(cfg.scene, self.dev) if cfg.whole_body else None
         self.step = 0  # dance step (policy ticks since dance time 0)
+        self.heading_zero_rad = 0.0  # IMU yaw at dance time 0 (`reset`)
         self._fade: tuple[torch.Tensor, int, int] | None = None
         self.last_action = torch.zeros(1, go1.NUM_JOINTS)
         self._ids = torch.zeros(1, dtype=torch.long)
@@ -125,21 +127,25 @@ class DanceController:
         feet down, trunk at the standing pose) over ``steps`` ticks."""
         self._fade = (self._row(0).clone(), self.step, max(1, steps))
 
-    @staticmethod
-    def measurement(reading: Reading) -> Measurement:
+    def measurement(self, reading: Reading) -> Measurement:
+        """The reading as the actor's `Measurement`, its heading relative to the dance's start."""
         t = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float32)[None]  # noqa: E731
         return Measurement.from_imu(
             t(reading.quat_wxyz),
             t(reading.gyro_rad_s),
             t(reading.joint_pos_rad),
             t(reading.joint_vel_rad_s),
+            self.heading_zero_rad,
         )
 
     def reset(self, reading: Reading) -> None:
-        """Dance time 0: no previous action, the history filled with the current frame."""
+        """Dance time 0: no previous action, the history filled with the current frame, the
+        heading measured from here."""
         self.step = 0
         self._fade = None
         self.last_action = torch.zeros(1, go1.NUM_JOINTS)
+        quat = torch.as_tensor(np.asarray(reading.quat_wxyz), dtype=torch.float32)[None]
+        self.heading_zero_rad = float(yaw_from_quat(quat)[0])
         prop = self.actor_obs.proprio(self.measurement(reading), self.last_action)
         self.actor_obs.reset(self._ids, prop)
 
@@ -780,7 +786,7 @@ def write_outputs(
     with atomic_path(paths["log"]) as tmp:
         np.savez_compressed(tmp, **result.log)
     if policy is not None and "t_s" in result.log:
-        from quaddance.play.dance import whole_body_metrics
+        from quaddance.play.metrics import whole_body_metrics
         from quaddance.play.rollout import save_rollout
 
         beats = np.zeros(0) if beats_s is None else np.asarray(beats_s, dtype=float)

@@ -213,7 +213,8 @@ def run_live(job: LiveJob, status=lambda msg: None) -> tuple[dict, dict[str, Pat
         write_outputs,
     )
     from quaddance.fileio import check_output_file, ensure_dir, write_json
-    from quaddance.play.dance import target_config_for, whole_body_metrics
+    from quaddance.play.dance import target_config_for
+    from quaddance.play.metrics import whole_body_metrics
     from quaddance.play.policy import OnnxPolicy, shipped_policy_path
     from quaddance.play.rollout import save_rollout
 

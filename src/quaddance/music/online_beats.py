@@ -17,14 +17,21 @@ The tracker sees the audio block by block and never looks ahead. Per 11.6 ms fra
    Half-way between beats the score is projected one period ahead and the next beat is
    predicted; a beat is reported as soon as the audio reaches its predicted time, so reporting
    is at most one block late (``LATENCY_S``) and the motion can be planned on ``next_beat_s``.
-4. Lock: a beat is "supported" when the onset envelope peaks near it; the tracker is locked
-   when most of the last beats (``LOCK_SUPPORT`` of at least ``LOCK_BEATS`` beats spanning
-   ``LOCK_SPAN_S``) were supported at a steady tempo, and unlocks after ``UNLOCK_MISSES``
-   unsupported beats in a row or when the music stops (``SILENCE_RESET_S`` of silence also
-   resets the tempo and phase, so a restart is found afresh).
-5. Downbeats (4/4): the bar position whose beats carry the most kick/bass-band onsets over
+4. Lock: a (reported) beat is "supported" when the onset envelope peaks near it; the tracker
+   is locked when most of the last beats (``LOCK_SUPPORT`` of at least ``LOCK_BEATS`` beats
+   spanning ``LOCK_SPAN_S``) were supported at a steady tempo, and unlocks after
+   ``UNLOCK_MISSES`` unsupported beats in a row or when the music stops (``SILENCE_RESET_S`` of
+   silence also resets the tempo and phase, so a restart is found afresh).
+5. Phase hold (off-beat guard): once locked, the reported beats keep their grid. When the
+   score's next beat lands more than ``PHASE_JUMP_BEATS`` of a beat off the grid of the
+   reported beats (the score has switched to another, louder pulse: off-beat or swung hats
+   that come in after the intro, a snare on the "and"), the reported beats stay on the old grid
+   (an offset from the score's beats) for as long as that grid stays supported; when it loses
+   the lock, the reported beats follow the score again. A held grid follows its own onsets: each
+   supported beat moves the next ones onto its onset peak.
+6. Downbeats (4/4): the bar position whose beats carry the most kick/bass-band onsets over
    the last bars, with hysteresis.
-6. Energy: RMS mapped to [0, 1] by the 5th and 95th percentiles of the last 30 s (the offline
+7. Energy: RMS mapped to [0, 1] by the 5th and 95th percentiles of the last 30 s (the offline
    choreographer's ``normalized_energy``, causally), smoothed over about 1 s.
 """
 
@@ -110,6 +117,12 @@ UNLOCK_MISSES = 4
 """Unsupported beats in a row that lose the lock (a break without drums keeps it a while)."""
 STEADY_TEMPO_RATIO = 1.04
 """Tempo counts as steady when it stays within this ratio over the lock's beats."""
+PHASE_JUMP_BEATS = 0.25
+"""While locked, a next beat of the score further than this fraction of a beat from the
+reported grid is a jump to another pulse, which the reported beats do not follow (item 5). A
+quarter beat: well beyond the drift of a steady or ramping tempo (BTrack's TIGHTNESS weight
+of an interval 25 % off a period is exp(-0.5 (5 ln 0.75)^2) = 0.36, of one 4 % off 0.98), and
+no more than the half beat to an off-beat or the third of a beat to a swung one."""
 
 SILENCE_DB = -50.0
 """Frames quieter than this, dB relative to the running loudness peak, are silence."""
@@ -413,6 +426,7 @@ class OnlineBeatTracker:
         self._beat_index = 0
         self._bar_evidence = np.zeros(BEATS_PER_BAR)
         self._bar_phase = 0  # index (mod 4) of the beats that are downbeats
+        self._beat_offset = 0.0  # reported beats follow the score's beats by this, periods
         self._locked = False
         self._misses = 0
         self._last_beat_s = float("nan")
@@ -534,6 +548,9 @@ class OnlineBeatTracker:
             self._m0 = 1  # predict the first beat now
         elif abs(np.log(self._period / old_period)) > np.log(REBUILD_TEMPO_RATIO):
             self._rebuild_cumscore()
+            # A new period: the offset found on the old one no longer applies (while locked,
+            # the hold below keeps the reported grid continuous across the change).
+            self._beat_offset = 0.0
 
     def _rebuild_cumscore(self) -> None:
         """Recompute the cumulative beat score over the history with the new period: scores
@@ -561,11 +578,29 @@ class OnlineBeatTracker:
         v = np.arange(1, n_future + 1)
         weight = np.exp(-0.5 * ((v - p / 2) / (p / 2)) ** 2)
         ahead = int(np.argmax(future[n:] * weight)) + 1  # frames after the newest frame
-        beat_s = now_t_s + ahead * FRAME_S
-        self._scheduled.append(beat_s)
-        self._pending_support.append(self._n_frames + ahead)
-        self._pending_bar.append(self._n_frames + ahead)
+        self._hold_phase(now_t_s + (ahead + self._beat_offset * p) * FRAME_S)
+        # The reported beat follows the score's by ``_beat_offset``; support and downbeats are
+        # scored at the reported beats, so that a held grid that loses its onsets loses the lock.
+        if ahead + self._beat_offset * p < 1:
+            self._beat_offset += 1.0  # that beat of the held grid is past: the next one
+        beat_frames = ahead + self._beat_offset * p
+        self._scheduled.append(now_t_s + beat_frames * FRAME_S)
+        self._pending_support.append(self._n_frames + round(beat_frames))
+        self._pending_bar.append(self._n_frames + round(beat_frames))
         self._m0 = ahead + round(p / 2)
+
+    def _hold_phase(self, beat_s: float) -> None:
+        """While locked, keep the reported beats on their grid when the score's next beat
+        (reported at ``beat_s`` with the current offset) jumps off it (item 5 of the module's
+        docstring): move the offset by the jump, so the reported beat lands one period after
+        the previous one."""
+        prev_s = self._scheduled[-1] if self._scheduled else self._last_beat_s
+        if not (self._locked and np.isfinite(prev_s)):
+            return
+        jump = (beat_s - prev_s) / (self._period * FRAME_S) - 1.0  # beats off the grid
+        jump -= np.round(jump)  # the nearest grid beat: within half a beat
+        if abs(jump) > PHASE_JUMP_BEATS:
+            self._beat_offset -= jump
 
     def _check_support(self) -> None:
         """Score beats whose neighbourhood (+-35 ms) has been heard: supported or not."""
@@ -582,6 +617,11 @@ class OnlineBeatTracker:
             start = max(0, i - round(self._period))
             level = float(onset[start : i + radius + 1].mean())
             supported = near > SUPPORT_RATIO * level and near > 0.0
+            if supported and self._beat_offset != 0.0:
+                # A held grid is not the score's: it follows its own onsets, moving the next
+                # beats by the frames this one's onset peak lay off it.
+                peak = lo + int(np.argmax(onset[lo : i + radius + 1]))
+                self._beat_offset += (peak - i) / self._period
             self._support.append(supported)
             self._period_at_beats.append(self._period)
             self._update_lock(supported)
@@ -639,6 +679,7 @@ class OnlineBeatTracker:
             max(periods) / max(min(periods), 1e-9) > 1.25 and not all(recent[-2:])
         ):
             self._locked = False
+            self._beat_offset = 0.0  # the held grid lost its onsets: follow the score again
 
     def _confidence(self) -> float:
         recent = self._support[-LOCK_BEATS:]

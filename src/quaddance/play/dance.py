@@ -52,22 +52,6 @@ class DanceOutputs:
     timings_s: dict[str, float] = field(default_factory=dict)
 
 
-def whole_body_metrics(result, beats_s, standing_height_m: float) -> dict[str, Any]:
-    """metrics.json's ``body`` (trunk tracking, `play.metrics.body_metrics`) and
-    ``beat_coverage`` (fraction of beats with a motion accent of the robot, paws or trunk, as
-    measured in the simulator, within +-100 ms). `dance`, `deploy` and `live` all use it."""
-    from quaddance.choreo.accents import beat_coverage, motion_accents_s
-    from quaddance.play.metrics import body_metrics
-
-    measured = result.body_measured(standing_height_m)
-    accents = motion_accents_s(result.time_s, result.feet_m, measured)
-    return {
-        "body": body_metrics(result.body_targets, measured),
-        # None without music beats (a motion file alone): nothing to cover.
-        "beat_coverage": beat_coverage(accents, beats_s) if len(beats_s) else None,
-    }
-
-
 def target_config_for(policy: OnnxPolicy, mode: str):
     """Targets in the range the policy was trained on (its JSON), in the requested mode."""
     from quaddance.targets import TargetConfig
@@ -106,7 +90,7 @@ def _run_dance(
     show_render_progress: bool,
 ) -> DanceOutputs:
     from quaddance.pipeline import make_dance
-    from quaddance.play.metrics import dance_metrics
+    from quaddance.play.metrics import dance_metrics, whole_body_metrics
     from quaddance.play.plots import plot_feet
     from quaddance.play.policy import OnnxPolicy, shipped_policy_path
     from quaddance.play.rollout import rollout, save_rollout

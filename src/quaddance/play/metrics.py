@@ -373,3 +373,18 @@ def summary_table(metrics: Mapping[str, Any]) -> Any:
     ]:
         table.add_row(label, text, "")
     return table
+
+
+def whole_body_metrics(result, beats_s, standing_height_m: float) -> dict[str, Any]:
+    """metrics.json's ``body`` (trunk tracking, `play.metrics.body_metrics`) and
+    ``beat_coverage`` (fraction of beats with a motion accent of the robot, paws or trunk, as
+    measured in the simulator, within +-100 ms). `dance`, `deploy` and `live` all use it."""
+    from quaddance.choreo.accents import beat_coverage, motion_accents_s
+
+    measured = result.body_measured(standing_height_m)
+    accents = motion_accents_s(result.time_s, result.feet_m, measured)
+    return {
+        "body": body_metrics(result.body_targets, measured),
+        # None without music beats (a motion file alone): nothing to cover.
+        "beat_coverage": beat_coverage(accents, beats_s) if len(beats_s) else None,
+    }

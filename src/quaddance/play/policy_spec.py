@@ -556,7 +556,9 @@ def _check_agreement(r: _Reader, spec: PolicySpec) -> None:
 
     ours = [
         (t["name"], t["size"])
-        for t in actor_terms(cfg.obs.history_len, len(cfg.obs.preview_s), cfg.whole_body)
+        for t in actor_terms(
+            cfg.obs.history_len, len(cfg.obs.preview_s), cfg.whole_body, cfg.obs.heading
+        )
     ]
     theirs = [(t.name, t.size) for t in spec.obs_layout]
     if theirs != ours:

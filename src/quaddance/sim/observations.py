@@ -19,7 +19,7 @@ import torch
 from quaddance.sim import go1
 from quaddance.sim.config import DanceTaskCfg, DomainRandCfg
 from quaddance.sim.kinematics import estimate_foot_height_m, leg_geometry
-from quaddance.sim.state import RobotState, quat_rotate_inverse
+from quaddance.sim.state import RobotState, quat_rotate_inverse, wrap_angle_rad, yaw_from_quat
 
 if TYPE_CHECKING:
     from quaddance.sim.task import DanceEnv
@@ -43,6 +43,7 @@ class Measurement:
     gyro_rad_s: torch.Tensor  # (N, 3) trunk angular velocity, trunk frame
     joint_pos_rad: torch.Tensor  # (N, 12) encoder readings (calibration offset included)
     joint_vel_rad_s: torch.Tensor  # (N, 12)
+    heading_rad: torch.Tensor  # (N,) IMU yaw, relative to the heading at the dance's start
 
     @classmethod
     def from_imu(
@@ -51,20 +52,31 @@ class Measurement:
         gyro_rad_s: torch.Tensor,
         joint_pos_rad: torch.Tensor,
         joint_vel_rad_s: torch.Tensor,
+        heading_zero_rad: float = 0.0,
     ) -> Measurement:
-        """From the IMU's orientation quaternion (N, 4; w, x, y, z) as a Go1 reports it."""
+        """From the IMU's orientation quaternion (N, 4; w, x, y, z) as a Go1 reports it;
+        ``heading_zero_rad`` is the IMU yaw when the dance began."""
         down = torch.zeros(quat_wxyz.shape[0], 3, dtype=quat_wxyz.dtype, device=quat_wxyz.device)
         down[:, 2] = -1.0
-        return cls(quat_rotate_inverse(quat_wxyz, down), gyro_rad_s, joint_pos_rad, joint_vel_rad_s)
+        heading = wrap_angle_rad(yaw_from_quat(quat_wxyz) - heading_zero_rad)
+        return cls(
+            quat_rotate_inverse(quat_wxyz, down),
+            gyro_rad_s,
+            joint_pos_rad,
+            joint_vel_rad_s,
+            heading,
+        )
 
     @classmethod
     def from_state(cls, state: RobotState, joint_offset_rad: torch.Tensor) -> Measurement:
-        """What the simulated robot's sensors read (encoders carry their calibration offset)."""
+        """What the simulated robot's sensors read (encoders carry their calibration offset;
+        training episodes start facing yaw 0, so the heading is the yaw)."""
         return cls(
             state.projected_gravity_b,
             state.base_ang_vel_b,
             state.joint_pos + joint_offset_rad,
             state.joint_vel,
+            state.base_yaw_rad,
         )
 
     def with_noise(self, dr: DomainRandCfg, gen: torch.Generator) -> Measurement:
@@ -79,6 +91,7 @@ class Measurement:
             noisy(self.gyro_rad_s, dr.gyro_noise_rad_s),
             noisy(self.joint_pos_rad, dr.joint_pos_noise_rad),
             noisy(self.joint_vel_rad_s, dr.joint_vel_noise_rad_s),
+            noisy(self.heading_rad, dr.heading_noise_rad),
         )
 
 
@@ -126,12 +139,16 @@ class ActorObservation:
         self.history_len = cfg.obs.history_len
         self.preview_steps = [round(s * cfg.policy_hz) for s in cfg.obs.preview_s]
         self.whole_body = cfg.whole_body
+        self.heading = cfg.whole_body and cfg.obs.heading
+        self._heading_rad = torch.zeros(num_envs, device=self.device)
         self.nominal_joint_pos = torch.tensor(go1.nominal_joint_pos(), device=self.device)
         self.geom = leg_geometry(cfg.scene)
         self.history = torch.zeros(num_envs, self.history_len, PROPRIO_DIM, device=self.device)
 
     def proprio(self, meas: Measurement, last_action: torch.Tensor) -> torch.Tensor:
-        """(N, PROPRIO_DIM): the `PROPRIO_TERMS`, in order."""
+        """(N, PROPRIO_DIM): the `PROPRIO_TERMS`, in order. The measurement's heading is
+        kept for the next `build` (it is not part of the history)."""
+        self._heading_rad = meas.heading_rad
         return torch.cat([t.fn(meas, last_action, self) for t in PROPRIO_TERMS], dim=1)
 
     def build(
@@ -149,6 +166,9 @@ class ActorObservation:
                 raise ValueError("a whole-body policy needs the dance's body targets")
             parts.append(body_targets_at(0))
             parts += [body_targets_at(k) for k in self.preview_steps]
+            if self.heading:
+                error = wrap_angle_rad(self._heading_rad - body_targets_at(0)[:, 3])
+                parts.append(error[:, None])
         return torch.cat(parts, dim=1)
 
     def push(self, prop: torch.Tensor) -> None:
@@ -163,11 +183,14 @@ class ActorObservation:
 
     def layout(self) -> list[dict]:
         """Actor terms in order: name, size and sensor source (the policy JSON's `obs.terms`)."""
-        return actor_terms(self.history_len, len(self.preview_steps), self.whole_body)
+        return actor_terms(self.history_len, len(self.preview_steps), self.whole_body, self.heading)
 
 
-def actor_terms(history_len: int, n_preview: int, whole_body: bool = False) -> list[dict]:
-    """The actor's terms in order, each `{"name", "size", "source"}`."""
+def actor_terms(
+    history_len: int, n_preview: int, whole_body: bool = False, heading: bool = False
+) -> list[dict]:
+    """The actor's terms in order, each `{"name", "size", "source"}` (``heading``: the
+    whole-body heading error, `ObsCfg.heading`)."""
     terms = [
         {"name": f"proprio.{t.name}", "size": t.size, "source": t.source} for t in PROPRIO_TERMS
     ]
@@ -183,6 +206,9 @@ def actor_terms(history_len: int, n_preview: int, whole_body: bool = False) -> l
         terms.append({"name": "body_targets_now", "size": 4, "source": "dance"})
         if n_preview:
             terms.append({"name": "body_targets_preview", "size": 4 * n_preview, "source": "dance"})
+        if heading:
+            # IMU heading since the dance began minus the target yaw, wrapped to +-pi.
+            terms.append({"name": "heading_error_rad", "size": 1, "source": "dance+imu"})
     return terms
 
 

@@ -75,8 +75,7 @@ class RobotState:
         w, x, y, z = self.base_quat_w.unbind(1)
         roll = torch.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
         pitch = torch.asin((2 * (w * y - z * x)).clamp(-1.0, 1.0))
-        yaw = torch.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-        return torch.stack([roll, pitch, yaw], dim=1)
+        return torch.stack([roll, pitch, yaw_from_quat(self.base_quat_w)], dim=1)
 
     @property
     def base_yaw_rad(self) -> torch.Tensor:
@@ -86,6 +85,17 @@ class RobotState:
     @functools.cached_property
     def base_lin_vel_b(self) -> torch.Tensor:
         return quat_rotate_inverse(self.base_quat_w, self.base_lin_vel_w)
+
+
+def yaw_from_quat(quat_wxyz: torch.Tensor) -> torch.Tensor:
+    """(N,) yaw (heading about the world vertical, rad) of (N, 4) w x y z quaternions."""
+    w, x, y, z = quat_wxyz.unbind(-1)
+    return torch.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+
+
+def wrap_angle_rad(angle: torch.Tensor) -> torch.Tensor:
+    """Angles wrapped to [-pi, pi)."""
+    return torch.remainder(angle + torch.pi, 2 * torch.pi) - torch.pi
 
 
 def quat_rotate_inverse(quat_wxyz: torch.Tensor, vec: torch.Tensor) -> torch.Tensor:
