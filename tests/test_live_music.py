@@ -251,6 +251,19 @@ def test_tracker_locks_on_a_click_track_within_6_s(bpm: float, block_s: float) -
     assert all(0.0 <= e.reported_s - e.time_s <= LATENCY_S for e in events)
 
 
+def test_tracker_locks_at_a_slow_tempo_as_soon_as_two_beats_confirm_the_heard_grid() -> None:
+    # 60 BPM: four reported beats would take 4 s after the first tempo estimate (2 s of music);
+    # the retrospective lock checks the grid on the music already heard, so two reported beats
+    # (plus the first estimate's 2 s and a beat for the phase to settle) suffice.
+    start_s = 0.5
+    y, ref = _click_track([(60.0, 10.0)], start_s=start_s)
+    events, locks, _ = _track(y)
+    lock_s = _first_lock_s(locks)
+    assert lock_s - start_s <= 4.5
+    errors = _errors_s(events, ref, lock_s, ref[-1])
+    assert len(errors) >= 4 and errors.max() <= HIT_WINDOW_S
+
+
 def test_tracker_predicts_the_next_beat_and_downbeat() -> None:
     y, ref = _click_track([(120.0, 12.0)])
     tracker = OnlineBeatTracker()
@@ -327,7 +340,8 @@ def test_tracker_loses_lock_in_silence_and_finds_the_music_again() -> None:
 def test_tracker_stays_unlocked_in_silence_and_noise() -> None:
     rng = np.random.default_rng(0)
     y = np.concatenate(
-        [np.zeros(3 * SR_HZ), 0.1 * rng.standard_normal(6 * SR_HZ)]  # silence, then hiss
+        # Silence, then 10 s of hiss (its onset peaks are everywhere, its periodicity is not).
+        [np.zeros(3 * SR_HZ), 0.1 * rng.standard_normal(10 * SR_HZ)]
     ).astype(np.float32)
     events, locks, tracker = _track(y)
     assert not any(locked for _, locked, _ in locks)

@@ -257,6 +257,17 @@ def test_l2_form_is_minus_c_times_squared_error():
     assert rewards.front_tracking(env).item() == pytest.approx(-30.0 * (0.05**2 + 0.08**2))
 
 
+def test_foot_slide_is_the_speed_of_the_feet_on_the_ground():
+    # FL lifted and moving (free), FR creeping 1 cm/s, RL sliding 3-4-5, RR still.
+    vel = torch.tensor([[[0.5, 0.5, 0.1], [0.01, 0.0, 0.0], [0.03, 0.04, 0.0], [0.0, 0.0, 0.0]]])
+    env = SimpleNamespace(
+        robot=SimpleNamespace(foot_height_m=torch.tensor([[0.08, 0.0, 0.002, 0.0]]), foot_vel_w=vel)
+    )
+    assert rewards.foot_slide(env).item() == pytest.approx(0.01 + 0.05)
+    # A slow creep costs in proportion to its speed, not its square (foot_slip's).
+    assert rewards.foot_slide(env).item() / rewards.foot_slip(env).item() > 10
+
+
 @pytest.mark.parametrize(
     ("name", "c_f", "lambda_f"),
     [

@@ -12,6 +12,8 @@ The tracker sees the audio block by block and never looks ahead. Per 11.6 ms fra
    by an online Viterbi filter over a log-tempo grid: tempo drifts cheaply and jumps at a fixed
    cost; a recent-weighted window lets a tempo change win within a few seconds, and the beat
    score is then recomputed on the new period so the beats move onto the new grid at once.
+   Once locked, the metrical level is held: a filter tempo of double or half the locked one
+   (the same beats, or every other one) keeps the tempo at the locked level.
 3. Beat phase with a cumulative beat score (Ellis' dynamic program run forwards, as in Stark's
    real-time BTrack): each frame scores its onset plus the best score one beat period back.
    Half-way between beats the score is projected one period ahead and the next beat is
@@ -19,7 +21,12 @@ The tracker sees the audio block by block and never looks ahead. Per 11.6 ms fra
    is at most one block late (``LATENCY_S``) and the motion can be planned on ``next_beat_s``.
 4. Lock: a (reported) beat is "supported" when the onset envelope peaks near it; the tracker
    is locked when most of the last beats (``LOCK_SUPPORT`` of at least ``LOCK_BEATS`` beats
-   spanning ``LOCK_SPAN_S``) were supported at a steady tempo, and unlocks after
+   spanning ``LOCK_SPAN_S``) were supported at a steady tempo, or, retrospectively, when the
+   current grid carried back over as many beats of the music already heard lands on onsets as
+   often, the last ``LOCK_RETRO_BEATS`` reported beats were supported, the tempo stayed steady
+   since the first of them (this saves the wait for beats that were heard before the first
+   tempo estimate or before the tempo settled). Either way the tempo's periodicity must stand
+   out of white noise's (``LOCK_PERIODICITY``). It unlocks after
    ``UNLOCK_MISSES`` unsupported beats in a row or when the music stops (``SILENCE_RESET_S`` of
    silence also resets the tempo and phase, so a restart is found afresh).
 5. Phase hold (off-beat guard): once locked, the reported beats keep their grid. When the
@@ -113,6 +120,16 @@ LOCK_SUPPORT = 0.75
 for a lock."""
 SUPPORT_RATIO = 1.4
 """A beat is supported when its onset peak is this many times the period's mean onset."""
+LOCK_RETRO_BEATS = 2
+"""Reported beats, supported at a steady tempo, that a retrospective lock needs (item 4): two,
+so that the interval between reported beats, not just one beat, agrees with the grid."""
+LOCK_PERIODICITY = 2.0
+"""Either lock (item 4) needs the tempo's autocorrelation salience to stand this many standard
+errors above white noise's (whose autocorrelation over n frames has a standard error of
+1 / sqrt(n)): onset peaks are everywhere in noise (nearly all of its beats are "supported"), so
+only a clear periodicity, not the support of the beats, tells music from hiss."""
+SUPPORT_RADIUS = 3
+"""A beat is supported by an onset peak within this many frames (+-35 ms)."""
 UNLOCK_MISSES = 4
 """Unsupported beats in a row that lose the lock (a break without drums keeps it a while)."""
 STEADY_TEMPO_RATIO = 1.04
@@ -419,6 +436,9 @@ class OnlineBeatTracker:
         self._viterbi: np.ndarray | None = None
         self._period = 0.0  # beat period, frames (0 = unknown)
         self._period_at_beats: list[float] = []
+        self._beat_frames: list[int] = []  # frame numbers of the scored beats
+        self._tempo_track: list[tuple[int, float]] = []  # (frame number, period) per estimate
+        self._periodicity = 0.0  # salience of the tempo, white-noise standard errors
         self._m0 = -1  # frames to the next beat prediction
         self._scheduled: list[float] = []  # predicted beat times not yet reported, s
         self._pending_support: list[int] = []  # frames of beats not yet scored
@@ -534,7 +554,9 @@ class OnlineBeatTracker:
             ok = k * periods <= max_lag
             sal[ok] += np.interp(k * periods[ok], lags, ac)
             count[ok] += 1
-        sal = sal / np.maximum(count, 1) * self._prior
+        sal = sal / np.maximum(count, 1)
+        raw_sal = sal
+        sal = sal * self._prior
         emis = sal / max(float(np.abs(sal).max()), 1e-9)
         if self._viterbi is None:
             self._viterbi = emis
@@ -542,7 +564,24 @@ class OnlineBeatTracker:
             self._viterbi = np.max(self._viterbi[:, None] + self._trans, axis=0) + emis
             self._viterbi -= self._viterbi.max()
         best = int(np.argmax(self._viterbi))
+        if self._locked and self._period > 0:
+            # Metrical level hold: once locked, a tempo of double or half the locked one puts
+            # beats on the same grid (every beat, or every other one, stays), so it is the same
+            # music heard at another level, not a tempo change; the reported tempo stays at the
+            # locked level (the best tempo near it), as a dancer keeps the step tempo it chose.
+            # A real tempo change (other ratios) or a lost lock lets the filter's best through.
+            here = np.log(60.0 * self._fps / self._period)
+            tol = np.log(STEADY_TEMPO_RATIO)
+            if abs(abs(self._log_bpm[best] - here) - np.log(2.0)) <= tol:
+                near = np.abs(self._log_bpm - here) <= tol
+                best = int(np.flatnonzero(near)[np.argmax(self._viterbi[near])])
+        # How clearly the chosen tempo is periodic, in standard errors (1 / sqrt(n)) of the
+        # autocorrelation of n frames of white noise.
+        self._periodicity = float(raw_sal[best]) * np.sqrt(len(onset))
         old_period, self._period = self._period, float(periods[best])
+        self._tempo_track.append((self._n_frames, self._period))
+        if len(self._tempo_track) > 2 * self._hist_len / self._tempo_hop:
+            del self._tempo_track[0]  # older than any lock window
         if old_period <= 0:
             self._rebuild_cumscore()  # the history so far was scored without a period
             self._m0 = 1  # predict the first beat now
@@ -602,29 +641,38 @@ class OnlineBeatTracker:
         if abs(jump) > PHASE_JUMP_BEATS:
             self._beat_offset -= jump
 
+    def _support_at(self, onset: np.ndarray, i: int) -> tuple[bool, int] | None:
+        """Whether history frame ``i`` has an onset peak within +-35 ms that stands out of the
+        period before it (``SUPPORT_RATIO``), and where that peak is; None if not all heard."""
+        radius = SUPPORT_RADIUS
+        lo = max(0, i - radius)
+        if i + radius >= len(onset) or lo >= len(onset) or i < 0:
+            return None
+        near = float(onset[lo : i + radius + 1].max())
+        start = max(0, i - round(self._period))
+        level = float(onset[start : i + radius + 1].mean())
+        peak = lo + int(np.argmax(onset[lo : i + radius + 1]))
+        return near > SUPPORT_RATIO * level and near > 0.0, peak
+
     def _check_support(self) -> None:
         """Score beats whose neighbourhood (+-35 ms) has been heard: supported or not."""
-        radius = 3
         cum_end = self._hist_start + len(self._onset_b)  # frame number after the newest
-        while self._pending_support and self._pending_support[0] + radius <= cum_end:
+        while self._pending_support and self._pending_support[0] + SUPPORT_RADIUS <= cum_end:
             frame = self._pending_support.pop(0)
             i = frame - self._hist_start - 1
             onset = np.asarray(self._onset_b)
-            lo = max(0, i - radius)
-            if i + radius >= len(onset) or lo >= len(onset):
+            scored = self._support_at(onset, i)
+            if scored is None:
                 continue
-            near = float(onset[lo : i + radius + 1].max())
-            start = max(0, i - round(self._period))
-            level = float(onset[start : i + radius + 1].mean())
-            supported = near > SUPPORT_RATIO * level and near > 0.0
+            supported, peak = scored
             if supported and self._beat_offset != 0.0:
                 # A held grid is not the score's: it follows its own onsets, moving the next
                 # beats by the frames this one's onset peak lay off it.
-                peak = lo + int(np.argmax(onset[lo : i + radius + 1]))
                 self._beat_offset += (peak - i) / self._period
             self._support.append(supported)
             self._period_at_beats.append(self._period)
-            self._update_lock(supported)
+            self._beat_frames.append(frame)
+            self._update_lock(supported, onset, i)
 
     def _count_bar(self) -> None:
         """Downbeat evidence for beats heard up to one period after them: the kick/bass onset
@@ -661,17 +709,56 @@ class OnlineBeatTracker:
         if self._bar_evidence[best] > BAR_SWITCH_RATIO * self._bar_evidence[self._bar_phase]:
             self._bar_phase = best
 
-    def _update_lock(self, supported: bool) -> None:
-        self._misses = 0 if supported else self._misses + 1
+    def _lock_need(self) -> int:
+        """Beats in the lock's window: at least ``LOCK_MIN_WINDOW_BEATS``, spanning
+        ``LOCK_SPAN_S``."""
         need = max(LOCK_BEATS, 1 + int(np.ceil(LOCK_SPAN_S / (self._period * FRAME_S) - 1e-9)))
-        need = max(need, LOCK_MIN_WINDOW_BEATS)
+        return max(need, LOCK_MIN_WINDOW_BEATS)
+
+    def _grid_heard(self, onset: np.ndarray, i: int, need: int) -> bool:
+        """Whether the music already heard supports the current beat grid: the ``need`` grid
+        beats at the current period that end at history frame ``i`` (a reported, supported
+        beat), most of them (``LOCK_SUPPORT``) supported as reported beats are."""
+        grid = [round(i - k * self._period) for k in range(need)]
+        scored = [self._support_at(onset, g) for g in grid]
+        if any(s is None for s in scored) or grid[-1] - round(self._period) < 0:
+            return False  # the grid reaches back before the music (or the silence) began
+        return float(np.mean([s[0] for s in scored if s is not None])) >= LOCK_SUPPORT
+
+    def _steady_since(self, frame: int) -> bool:
+        """Whether every tempo estimate in force since frame number ``frame`` stayed within
+        ``STEADY_TEMPO_RATIO``: the tempo at the beats alone misses a tempo that flickered
+        between them (an octave back and forth while the filter settles)."""
+        after = [p for f, p in self._tempo_track if f > frame]
+        before = [p for f, p in self._tempo_track if f <= frame][-1:]
+        periods = before + after
+        return bool(periods) and max(periods) / min(periods) <= STEADY_TEMPO_RATIO
+
+    def _update_lock(self, supported: bool, onset: np.ndarray, i: int) -> None:
+        self._misses = 0 if supported else self._misses + 1
+        need = self._lock_need()
         recent = self._support[-need:]
         periods = self._period_at_beats[-need:]
         steady = max(periods) / max(min(periods), 1e-9) <= STEADY_TEMPO_RATIO
         if not self._locked:
             # Most, not all, beats must be supported: some styles leave one beat of the bar
             # empty (beat 3 of a clave pattern).
-            if len(recent) == need and np.mean(recent) >= LOCK_SUPPORT and recent[-1] and steady:
+            forward = len(recent) == need and np.mean(recent) >= LOCK_SUPPORT and steady
+            # Retrospective: the beats reported so far are few (the first tempo estimate
+            # needs MIN_TEMPO_WINDOW_S, and 4 beats at 60 BPM take 4 s), but the music heard
+            # before them is in the history: when the current grid, carried back over the
+            # lock's window, lands on onsets there as it would on reported beats, the grid
+            # has been supported for as long, only not reported. The last LOCK_RETRO_BEATS
+            # reported beats must be supported at a steady tempo (the tempo is not an
+            # estimate of a moment, and the score's phase has settled).
+            retro = (
+                len(recent) >= LOCK_RETRO_BEATS
+                and all(recent[-LOCK_RETRO_BEATS:])
+                and self._steady_since(self._beat_frames[-LOCK_RETRO_BEATS])
+                and self._grid_heard(onset, i, need)
+            )
+            periodic = self._periodicity >= LOCK_PERIODICITY
+            if (forward or retro) and recent[-1] and periodic:
                 self._locked = True
                 if not np.isfinite(self._lock_s):
                     self._lock_s = self._time_s

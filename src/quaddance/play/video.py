@@ -50,6 +50,9 @@ ModelSource = mujoco.MjModel | Callable[[], mujoco.MjModel] | None
 """A model to render, or a zero-argument function that builds one; None means the dance scene
 with its visual meshes (`quaddance.sim.scene.build_model(visual=True)`)."""
 
+VIDEO_FPS = 30.0
+"""Frame rate of the videos, Hz."""
+
 EGL_PACKAGES = "libegl1 libegl-mesa0 libgl1-mesa-dri"
 """Debian packages that headless EGL rendering on the CPU needs."""
 
@@ -596,7 +599,7 @@ class VideoRenderer:
         out_path: str | Path,
         audio_path: str | Path | None = None,
         audio_offset_s: float = 0.0,
-        fps: float = 30.0,
+        fps: float = VIDEO_FPS,
         target_markers: bool = False,
         progress: bool = True,
     ) -> VideoStream:
@@ -630,7 +633,7 @@ class VideoRenderer:
         out_path: str | Path,
         audio_path: str | Path | None = None,
         audio_offset_s: float = 0.0,
-        fps: float = 30.0,
+        fps: float = VIDEO_FPS,
         target_heights_m: np.ndarray | None = None,
         progress: bool = True,
     ) -> dict[str, Any]:
@@ -646,7 +649,7 @@ class VideoRenderer:
         out_path: str | Path,
         audio_path: str | Path | None = None,
         audio_offset_s: float = 0.0,
-        fps: float = 30.0,
+        fps: float = VIDEO_FPS,
         target_heights_m: np.ndarray | None = None,
         progress: bool = True,
     ) -> RenderTask:
@@ -1014,7 +1017,7 @@ def render_video(
     out_path: str | Path,
     audio_path: str | Path | None = None,
     audio_offset_s: float = 0.0,
-    fps: float = 30.0,
+    fps: float = VIDEO_FPS,
     width: int = 640,
     height: int = 480,
     target_heights_m: np.ndarray | None = None,
@@ -1111,8 +1114,10 @@ def write_frames_png(
         return []
     frames_qpos = resample_qpos(layout, qpos, sim_fps, times)
     # The camera is smoothed over the whole trajectory, as in the video, then sampled.
-    all_times = np.arange(max(1, round(qpos.shape[0] / sim_fps * 30.0))) / 30.0
-    path_lookat = follow_lookat(layout, resample_qpos(layout, qpos, sim_fps, all_times), 30.0, cfg)
+    all_times = np.arange(max(1, round(qpos.shape[0] / sim_fps * VIDEO_FPS))) / VIDEO_FPS
+    path_lookat = follow_lookat(
+        layout, resample_qpos(layout, qpos, sim_fps, all_times), VIDEO_FPS, cfg
+    )
     lookat = np.stack([np.interp(times, all_times, col) for col in path_lookat.T], axis=1)
     arrays = {"qpos": frames_qpos, "lookat": lookat}
     if target_heights_m is not None:
@@ -1165,7 +1170,7 @@ def bench_render(
     seconds: float = 10.0,
     width: int = 640,
     height: int = 480,
-    fps: float = 30.0,
+    fps: float = VIDEO_FPS,
     worker_counts: Sequence[int] = (1, 2),
     progress: bool = True,
 ) -> dict[str, Any]:
