@@ -447,9 +447,11 @@ def test_shipped_policy_json_round_trips_unchanged() -> None:
 
     path, _ = _shipped_json()
     spec = PolicySpec.load(path)
-    # The shipped policy is the whole-body dancer: 192 paw inputs + 16 body-target inputs.
-    assert spec.format == FORMAT and spec.obs_dim == 208 and spec.task_cfg.obs.history_len == 3
-    assert spec.task_cfg.whole_body
+    # The shipped policy is the whole-body dancer: 192 paw inputs + 16 body-target inputs +
+    # the heading error.
+    assert spec.format == FORMAT and spec.obs_dim == 209 and spec.task_cfg.obs.history_len == 3
+    assert spec.task_cfg.whole_body and spec.task_cfg.obs.heading
+    assert spec.obs_layout[-1].name == "heading_error_rad"
     assert spec.to_json() == path.read_text()  # byte for byte
     assert PolicySpec.from_json(spec.to_json()) == spec
 

@@ -79,17 +79,21 @@ def test_foot_height_estimate_tracks_the_truth_while_the_policy_dances():
     table = policy.meta["front_feedforward"]["thigh_calf_offsets_rad"]
     env = DanceEnv(cfg, bank, random_start=False, compute_rewards=False, feedforward_table=table)
     obs = env.get_observations()["actor"]
-    err, lifted = [], 0.0
-    for _ in range(140):
+    err, lifted, landed = [], 0.0, None
+    for step in range(140):
         obs = env.step(torch.from_numpy(policy.act(obs.numpy())))[0]["actor"]
         s = env.robot
         est = estimate_foot_height_m(s.joint_pos, s.projected_gravity_b, leg_geometry())
         err.append((est - s.foot_height_m).abs().max().item())
         lifted = max(lifted, s.foot_height_m[0, 0].item())
+        if landed is None and (s.foot_height_m < 0.005).all():
+            landed = step
     assert lifted > 0.12  # the foot really went up
-    # From the first 0.1 s on: at the very start the robot drops from its spawn height with
-    # all four feet in the air, where no "lowest foot on the floor" holds.
-    assert max(err[5:]) < 0.01
+    # From 0.1 s after all four feet are down: at the very start the robot drops from its
+    # spawn height with its feet in the air, where no "lowest foot on the floor" holds, and
+    # lands hard enough to press its feet into MuJoCo's soft floor unevenly for a moment.
+    assert landed is not None and landed < 25
+    assert max(err[landed + 5 :]) < 0.01
 
 
 def test_actor_terms_come_only_from_robot_sensors():
