@@ -52,14 +52,18 @@ def _number(path: Path, where: str, value: Any, low: float, high: float) -> floa
     return float(value)
 
 
+def _known_keys(path: Path, where: str, raw: dict, allowed: set[str]) -> None:
+    unknown = sorted(set(raw) - allowed)
+    if unknown:
+        raise InputFileError(
+            path, f"{where}: unknown key {unknown[0]!r}; allowed: {_names(allowed)}"
+        )
+
+
 def _gesture(path: Path, where: str, raw: Any) -> Gesture:
     if not isinstance(raw, dict):
         raise InputFileError(path, f"{where} must be a table {{column = ..., amplitude = ...}}")
-    unknown = sorted(set(raw) - _GESTURE_KEYS)
-    if unknown:
-        raise InputFileError(
-            path, f"{where}: unknown key {unknown[0]!r}; allowed: {_names(_GESTURE_KEYS)}"
-        )
+    _known_keys(path, where, raw, _GESTURE_KEYS)
     for key in ("column", "amplitude"):
         if key not in raw:
             raise InputFileError(path, f"{where}: missing {key!r}")
@@ -95,11 +99,7 @@ def _move(path: Path, name: str, raw: Any) -> BodyMove:
     where = f"moves.{name}"
     if not isinstance(raw, dict):
         raise InputFileError(path, f"{where} must be a table")
-    unknown = sorted(set(raw) - _MOVE_KEYS)
-    if unknown:
-        raise InputFileError(
-            path, f"{where}: unknown key {unknown[0]!r}; allowed: {_names(_MOVE_KEYS)}"
-        )
+    _known_keys(path, where, raw, _MOVE_KEYS)
     if "gestures" not in raw:
         raise InputFileError(path, f"{where}: missing 'gestures' (a list; [] = stand still)")
     gestures = raw["gestures"]

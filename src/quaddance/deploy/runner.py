@@ -161,15 +161,7 @@ class DanceController:
         self.last_action = action
 
     def joint_targets(self, action: torch.Tensor) -> torch.Tensor:
-        return joint_targets(
-            action,
-            self.nominal_joint_pos,
-            self.action_scale,
-            self.feedforward,
-            self.targets_at,
-            self.body_feedforward,
-            self.body_targets_at,
-        )
+        return joint_targets(action, self)
 
 
 @dataclass

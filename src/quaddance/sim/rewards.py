@@ -114,19 +114,22 @@ def joint_limits(env: DanceEnv) -> torch.Tensor:
     return ((lo - q).clamp(min=0) + (q - hi).clamp(min=0)).sum(dim=1)
 
 
+def _on_ground(env: DanceEnv) -> torch.Tensor:
+    """(N, 4) feet on the ground: lower than 1 cm."""
+    return env.robot.foot_height_m < 0.01
+
+
 def foot_slip(env: DanceEnv) -> torch.Tensor:
     """Horizontal speed^2 of feet on the ground (height < 1 cm)."""
-    on_ground = env.robot.foot_height_m < 0.01
     v2 = (env.robot.foot_vel_w[..., :2] ** 2).sum(dim=2)
-    return (v2 * on_ground).sum(dim=1)
+    return (v2 * _on_ground(env)).sum(dim=1)
 
 
 def foot_slide(env: DanceEnv) -> torch.Tensor:
     """Horizontal speed of the feet on the ground (height < 1 cm), summed, m/s: the distance
     they slide per second. Unlike `foot_slip`'s squares it does not vanish for a slow creep,
     which had the robot wander about 30 cm in a 30 s dance."""
-    on_ground = env.robot.foot_height_m < 0.01
-    return (env.robot.foot_vel_w[..., :2].norm(dim=2) * on_ground).sum(dim=1)
+    return (env.robot.foot_vel_w[..., :2].norm(dim=2) * _on_ground(env)).sum(dim=1)
 
 
 def base_drift(env: DanceEnv) -> torch.Tensor:

@@ -7,7 +7,7 @@ playback (one env, no randomisation) use this same class.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from typing import Protocol
 
 import numpy as np
 import torch
@@ -39,24 +39,30 @@ def sample_dynamics(cfg: DanceTaskCfg, rng: np.random.Generator) -> np.ndarray:
     return rows
 
 
-def joint_targets(
-    actions: torch.Tensor,
-    nominal_joint_pos: torch.Tensor,
-    action_scale: torch.Tensor,
-    feedforward: FrontLiftFeedforward | None,
-    targets_at: Callable[[int], torch.Tensor],
-    body_feedforward: BodyFeedforward | None = None,
-    body_targets_at: Callable[[int], torch.Tensor] | None = None,
-) -> torch.Tensor:
+class JointTargetSource(Protocol):
+    """What the joint-target law reads: a `DanceEnv` (N envs) or the robot runner's
+    `deploy.runner.DanceController` (one robot)."""
+
+    nominal_joint_pos: torch.Tensor
+    action_scale: torch.Tensor
+    feedforward: FrontLiftFeedforward | None
+    body_feedforward: BodyFeedforward | None
+
+    def targets_at(self, ahead_steps: int) -> torch.Tensor: ...
+
+    def body_targets_at(self, ahead_steps: int) -> torch.Tensor: ...
+
+
+def joint_targets(actions: torch.Tensor, src: JointTargetSource) -> torch.Tensor:
     """(N, 12) PD targets: nominal pose + scaled actions + the front-lift feed-forward (and,
     for whole-body dance, the body feed-forward) for the targets due after this step (the
     contract written into the policy's JSON). Training and the robot runner (deploy/) both
     call this."""
-    target = nominal_joint_pos + action_scale * actions
-    if feedforward is not None:
-        target = target + feedforward(targets_at(1)[:, :2])
-    if body_feedforward is not None and body_targets_at is not None:
-        target = target + body_feedforward(body_targets_at(1))
+    target = src.nominal_joint_pos + src.action_scale * actions
+    if src.feedforward is not None:
+        target = target + src.feedforward(src.targets_at(1)[:, :2])
+    if src.body_feedforward is not None:
+        target = target + src.body_feedforward(src.body_targets_at(1))
     return target
 
 
@@ -207,15 +213,7 @@ class DanceEnv:
         return self.get_observations(), reward, done, extras
 
     def joint_targets(self, actions: torch.Tensor) -> torch.Tensor:
-        return joint_targets(
-            actions,
-            self.nominal_joint_pos,
-            self.action_scale,
-            self.feedforward,
-            self.targets_at,
-            self.body_feedforward,
-            self.body_targets_at,
-        )
+        return joint_targets(actions, self)
 
     # --- internals -------------------------------------------------------------------------------
     def _lagged_controls(self) -> torch.Tensor:
