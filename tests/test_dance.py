@@ -121,6 +121,18 @@ def test_dance_cli_bad_song_is_one_clear_line(tmp_path, content, suffix, needle)
     assert len(errors) == 1 and errors[0].startswith("quaddance: error: ")
 
 
+def test_analysis_in_a_second_process_makes_the_same_dance(short_song, tmp_path):
+    """`dance` analyses the song in another process while it loads torch: same dance."""
+    here = run_dance(DanceJob(out_dir=tmp_path / "here", song=short_song, video=False))
+    there = run_dance(
+        DanceJob(out_dir=tmp_path / "there", song=short_song, video=False, analysis_process=True)
+    )
+    assert here.dance.beats_s.size > 0
+    np.testing.assert_array_equal(here.dance.beats_s, there.dance.beats_s)
+    np.testing.assert_array_equal(here.dance.targets_m, there.dance.targets_m)
+    np.testing.assert_array_equal(here.dance.body_targets, there.dance.body_targets)
+
+
 def test_missing_song_is_reported(tmp_path):
     with pytest.raises(InputFileError, match=r"nope\.wav"):
         run_dance(DanceJob(out_dir=tmp_path, song=tmp_path / "nope.wav", video=False))

@@ -281,14 +281,15 @@ def test_video_with_music_is_in_sync_and_shows_the_robot(tmp_path: Path, scene_m
         progress=False,
         workers=2,
     )
-    assert timing["frames"] == 75 and timing["workers"] == 2
+    n_video = round(2.5 * video.VIDEO_FPS)
+    assert timing["frames"] == n_video and timing["workers"] == 2
 
     info = video.video_info(out)
     assert info["has_video"] and info["has_audio"]
     # The song is longer than the dance; the video is cut at the dance's 2.5 s.
     assert info["duration_s"] == pytest.approx(2.5, abs=0.06)
     n_frames, _ = imageio_ffmpeg.count_frames_and_secs(str(out))
-    assert n_frames == 75  # both segments joined
+    assert n_frames == n_video  # both segments joined
 
     # Sync: the click at song time 1.5 s plays at video time 1.5 - 0.5 = 1.0 s.
     audio = _decode_audio(out)
@@ -323,11 +324,11 @@ def test_frames_from_several_workers_come_in_order(tmp_path: Path, scene_model) 
             time.sleep(0.5 * workers)  # the caller busy elsewhere while the workers start
             out = tmp_path / f"w{workers}.mp4"
             timing = renderer.render(qpos, SIM_FPS, out, progress=False)
-        assert timing["frames"] == 30 and timing["workers"] == workers
+        assert timing["frames"] == round(video.VIDEO_FPS) and timing["workers"] == workers
         reader = imageio_ffmpeg.read_frames(str(out))
         next(reader)
         frames[workers] = np.stack([np.frombuffer(f, np.uint8).astype(int) for f in reader])
-    assert frames[1].shape == frames[3].shape == (30, 160 * 120 * 3)
+    assert frames[1].shape == frames[3].shape == (round(video.VIDEO_FPS), 160 * 120 * 3)
     # The same pictures in the same order (the encoder is deterministic for equal input).
     assert np.abs(frames[1] - frames[3]).max() <= 2
     # ... and the leg really moves, so a shuffled order would show.
@@ -356,13 +357,14 @@ def test_video_streamed_during_the_simulation_equals_the_one_made_afterwards(
         for q, t in zip(qpos, targets, strict=True):
             stream.add(q, t)
         timing = stream.finish().wait()
-    assert timing["frames"] == 60
+    n_video = round(2.0 * video.VIDEO_FPS)
+    assert timing["frames"] == n_video
     frames = []
     for out in outs:
         reader = imageio_ffmpeg.read_frames(str(out))
         next(reader)
         frames.append(np.stack([np.frombuffer(f, np.uint8).astype(int) for f in reader]))
-    assert frames[0].shape == frames[1].shape == (60, 160 * 120 * 3)
+    assert frames[0].shape == frames[1].shape == (n_video, 160 * 120 * 3)
     assert np.abs(frames[0] - frames[1]).max() <= 2
 
 

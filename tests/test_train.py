@@ -206,6 +206,16 @@ def test_resume_from_a_corrupt_checkpoint_names_the_file(trained, tmp_path, corr
 # --- target bank ----------------------------------------------------------------------------
 
 
+def test_resume_with_another_task_points_to_init_from(trained, tmp_path):
+    run_dir = tmp_path / "run"
+    shutil.copytree(trained.run_dir, run_dir)
+    cfg = make_cfg(run_dir, resume=True)
+    cfg.task.whole_body = True  # the paws-only run's networks have fewer inputs
+    with pytest.raises(InputFileError, match="--init-from") as info:
+        Trainer(cfg, bank=small_bank(), log=lambda *a: None)
+    assert "checkpoint.pt" in str(info.value)
+
+
 def test_build_bank_makes_and_caches_front_foot_targets(tmp_path):
     cfg = make_cfg(tmp_path, bank_duration_s=8.0)
     bank = build_bank(cfg)
@@ -244,6 +254,39 @@ def test_train_rejects_bad_options_before_any_work(tmp_path, args, needle):
     result = CliRunner().invoke(app, ["train", "--run-dir", str(run_dir), *args])
     assert result.exit_code == 2
     assert needle in result.output
+    assert not run_dir.exists()
+
+
+@pytest.mark.parametrize(
+    ("args", "want"),
+    [
+        ([], (3_000_000, 13_000_000)),  # the default from scratch
+        (["--curriculum", "0.001", "0.002"], (1_000, 2_000)),
+        (["--curriculum", "0", "0"], None),  # the whole task at once
+    ],
+)
+def test_train_whole_body_curriculum_option(tmp_path, monkeypatch, args, want):
+    import quaddance.train as train_mod
+
+    seen = {}
+
+    def fake_train(cfg, **kwargs):
+        seen["cfg"] = cfg
+        raise SystemExit(0)
+
+    monkeypatch.setattr(train_mod, "train", fake_train)
+    monkeypatch.setattr(train_mod, "build_bank", lambda cfg: None)
+    run = ["train", "--whole-body", "--run-dir", str(tmp_path / "run"), *args]
+    result = CliRunner().invoke(app, run)
+    assert result.exit_code == 0, result.output
+    assert seen["cfg"].curriculum_env_steps == want
+
+
+def test_train_curriculum_rejects_an_end_before_its_start(tmp_path):
+    run_dir = tmp_path / "run"
+    args = ["train", "--whole-body", "--run-dir", str(run_dir), "--curriculum", "5", "2"]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 2 and "--curriculum" in result.output
     assert not run_dir.exists()
 
 

@@ -123,7 +123,9 @@ def test_the_robot_runner_measures_heading_from_the_dance_start():
     assert float(ctrl.measurement(reading(1.25)).heading_rad[0]) == pytest.approx(0.05, abs=1e-5)
 
 
-def _hold_env(poses: list[tuple[float, float, float, float]], whole_body: bool):
+def _hold_env(
+    poses: list[tuple[float, float, float, float]], whole_body: bool, curriculum: float = 1.0
+):
     from quaddance.sim.task import DanceEnv
 
     cfg = DanceTaskCfg(whole_body=whole_body, num_envs=len(poses))
@@ -133,6 +135,7 @@ def _hold_env(poses: list[tuple[float, float, float, float]], whole_body: bool):
     ramp = np.clip((np.arange(n) - 25) / 50, 0, 1)[:, None]
     bank[:, :, 4:] = ramp * np.asarray(poses, np.float32)[:, None, :]
     env = DanceEnv(cfg, bank, random_start=False, seed=0)
+    env.curriculum_scale = curriculum
     env.bank_idx[:] = torch.arange(len(poses))
     for _ in range(n - 1):
         _, _, _, extras = env.step(torch.zeros(len(poses), 12))
@@ -154,6 +157,38 @@ def test_body_feedforward_moves_the_simulated_trunk_and_rewards_track_it():
     env0, extras0 = _hold_env(poses, whole_body=False)
     assert (env0.robot.base_rpy_rad[:, 0] - env0.robot.base_rpy_rad[0, 0]).abs().max() < 0.03
     assert not any(f"/reward/{name}" in extras0["log"] for name in rewards.BODY_TERMS)
+
+
+def test_curriculum_scale_zero_is_the_paws_only_task_and_half_halves_it():
+    poses = [(0.0, 0, 0, 0), (0, 0.15, 0, 0), (0, 0, 0, 0.15)]
+    env0, extras0 = _hold_env(poses, whole_body=True, curriculum=0.0)
+    assert env0.body_targets_at(0).abs().max() == 0.0  # the bank's trunk motion is scaled away
+    assert (env0.robot.base_rpy_rad - env0.robot.base_rpy_rad[0]).abs().max() < 0.03
+    for name in env0.cfg.rewards.curriculum_terms:  # and these terms are off
+        assert f"/reward/{name}" not in extras0["log"]
+    assert "/reward/front_tracking" in extras0["log"]
+    env, extras = _hold_env(poses, whole_body=True, curriculum=0.5)
+    assert torch.allclose(env.body_targets_at(0), 0.5 * env.bank[env.bank_idx, -1, 4:])
+    assert env.robot.base_rpy_rad[1, 0] - env.robot.base_rpy_rad[0, 0] == pytest.approx(
+        0.075, abs=0.03
+    )
+    for name in env.cfg.rewards.curriculum_terms:
+        assert f"/reward/{name}" in extras["log"]
+
+
+def test_curriculum_scale_grows_linearly_between_its_env_steps():
+    from quaddance.train import curriculum_scale_at
+
+    ramp = (1_000, 3_000)
+    assert curriculum_scale_at(None, 0) == 1.0
+    assert [curriculum_scale_at(ramp, n) for n in (0, 1_000, 2_000, 2_500, 3_000, 9_000)] == [
+        0.0,
+        0.0,
+        0.5,
+        0.75,
+        1.0,
+        1.0,
+    ]
 
 
 def test_relative_terms_equal_the_old_ones_without_body_targets():

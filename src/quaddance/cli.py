@@ -332,12 +332,22 @@ def train_cmd(
             "ones (e.g. --whole-body's body targets) start at zero weight."
         ),
     ] = None,
+    curriculum: Annotated[
+        tuple[float, float] | None,
+        typer.Option(
+            help="Whole-body curriculum, millions of env steps: the paws-only task until START "
+            "(no trunk motion, no trunk-tracking or foot-slide reward), the whole-body task "
+            "from END. Default: 3 13 from scratch, none with --init-from; "
+            "0 0: full size throughout.",
+            metavar="START END",
+        ),
+    ] = None,
 ) -> None:
     """Train the dance policy with PPO; exports RUN_DIR/policy.onnx and policy.json."""
     from rich.console import Console
 
     from quaddance.sim.config import DanceTaskCfg, ObsCfg, RewardCfg
-    from quaddance.train import PRESETS, TrainCfg, train
+    from quaddance.train import DEFAULT_CURRICULUM_M_STEPS, PRESETS, TrainCfg, train
 
     if engine not in ("cpu", "gpu"):
         raise typer.BadParameter(f"--engine must be cpu or gpu, got {engine!r}")
@@ -347,6 +357,14 @@ def train_cmd(
         RewardCfg.named(reward)
     except ValueError as err:
         raise typer.BadParameter(str(err)) from err
+    if curriculum is None and whole_body and init_from is None:
+        curriculum = DEFAULT_CURRICULUM_M_STEPS
+    ramp_steps = None
+    if curriculum is not None and whole_body:
+        start, end = curriculum
+        if not (0 <= start <= end < 1e6) or not all(math.isfinite(x) for x in curriculum):
+            raise typer.BadParameter(f"--curriculum needs 0 <= START <= END, got {start} {end}")
+        ramp_steps = (round(start * 1e6), round(end * 1e6)) if end > 0 else None
     console = Console(stderr=True)
     cfg = TrainCfg(
         run_dir=run_dir,
@@ -362,6 +380,7 @@ def train_cmd(
         checkpoint_every_s=checkpoint_every,
         max_minutes=minutes,
         init_from=init_from,
+        curriculum_env_steps=ramp_steps,
         task=DanceTaskCfg(
             front_feedforward=feedforward, whole_body=whole_body, obs=ObsCfg(heading=whole_body)
         ),
@@ -438,6 +457,7 @@ def dance_cmd(
         randomize=randomize,
         style=style,
         moves=moves,
+        analysis_process=True,
     )
     progress = Progress(
         TextColumn("{task.description}"),

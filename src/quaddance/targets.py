@@ -20,7 +20,6 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-from scipy.signal import find_peaks, peak_widths
 
 from quaddance.choreo.choreographer import MIN_JERK_PEAK_SPEED, LiftPlan, min_jerk, render_lifts
 from quaddance.errors import QuaddanceError
@@ -188,6 +187,10 @@ def _detect_lifts(
 ) -> tuple[list[_Lift], np.ndarray, np.ndarray]:
     """Find the human lifts of both feet. Returns the lifts (height = human prominence),
     and each one's half-height interval (start, end), s."""
+    # scipy.signal here, not at the top: `dance` imports this module before it starts its
+    # helper processes, and scipy.signal costs a second there.
+    from scipy.signal import find_peaks, peak_widths
+
     lifts: list[_Lift] = []
     starts, ends = [], []
     for foot in (0, 1):
@@ -518,6 +521,8 @@ def paw_clamp_report(
     bumps of at least ``cfg.min_prominence_m``; robot peaks above ``cfg.min_lift_m``), how
     many human lifts were above the scale reference (clipped to ``max_height_m``), and the
     highest target, m."""
+    from scipy.signal import find_peaks
+
     feet = np.asarray(human_feet_m, dtype=np.float64)
     lifts, _, _ = _detect_lifts(feet, human_fps, cfg)
     sizes = np.array([lift.height_m for lift in lifts])

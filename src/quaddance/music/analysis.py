@@ -223,6 +223,18 @@ def _local_normalise(x: np.ndarray, fps: float, cfg: AnalysisConfig) -> np.ndarr
     return x / np.maximum(level, 0.1 * float(np.mean(level)) + 1e-9)
 
 
+def rms_from_stft(stft: np.ndarray, n_fft: int) -> np.ndarray:
+    """(frames,) RMS of each frame from its magnitude spectrum (n_fft // 2 + 1, frames), as
+    ``librosa.feature.rms(S=stft, frame_length=n_fft)[0]`` computes it (Parseval, the DC and
+    Nyquist bins counted once). Written out because importing ``librosa.feature`` loads
+    40 numba functions: about 1 s of the `dance` command's start-up on 2 cores."""
+    power = np.abs(stft) ** 2  # a copy, in the spectrum's own precision as librosa's
+    power[0] *= 0.5
+    if n_fft % 2 == 0:
+        power[-1] *= 0.5
+    return np.sqrt(2.0 * power.sum(axis=0) / n_fft**2)
+
+
 def _features(y: np.ndarray, sr: int, cfg: AnalysisConfig) -> _Features:
     import librosa
 
@@ -260,13 +272,13 @@ def _features(y: np.ndarray, sr: int, cfg: AnalysisConfig) -> _Features:
     beat_onset = _local_normalise(
         unit_mean(raw) + cfg.high_band_weight * unit_mean(high_onset), fps, cfg
     )
-    rms = librosa.feature.rms(S=stft, frame_length=cfg.n_fft)[0]
+    rms = rms_from_stft(stft, cfg.n_fft)
     # tuning=0 assumes A440: estimating the tuning costs a third of the analysis time and
     # chroma only needs to tell chords apart.
-    chroma = librosa.feature.chroma_stft(S=power, sr=sr, n_fft=cfg.n_fft, tuning=0.0)
+    chroma_fb = librosa.filters.chroma(sr=sr, n_fft=cfg.n_fft, tuning=0.0)
+    chroma = librosa.util.normalize(chroma_fb @ power, norm=np.inf, axis=0)
     freqs_hz = librosa.fft_frequencies(sr=sr, n_fft=cfg.n_fft)
     bass = (freqs_hz >= 30.0) & (freqs_hz <= cfg.bass_chroma_max_hz)
-    chroma_fb = librosa.filters.chroma(sr=sr, n_fft=cfg.n_fft, tuning=0.0)
     bass_chroma = chroma_fb[:, bass] @ power[bass]
     hit = flux_log.mean(axis=0)
     return _Features(tempo_onset, beat_onset, low_onset, raw, rms, hit, chroma, bass_chroma, fps)

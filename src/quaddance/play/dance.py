@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from concurrent.futures import Future
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -42,6 +43,10 @@ class DanceJob:
     target_markers: bool = True
     style: str = "mixed"  # choreography style
     moves: Path | None = None  # a --moves TOML file of extra body moves and styles
+    # Analyse the song in a second process while this one loads torch and the policy: for a
+    # one-off command (`quaddance dance`) in a fresh process, where both imports are start-up
+    # cost; not for loops over many songs (eval), which import librosa once.
+    analysis_process: bool = False
 
 
 @dataclass
@@ -73,17 +78,56 @@ def run_dance(
     the simulation; feet.png is drawn while the video renders.
     """
     t_start = time.perf_counter()
-    if not job.video:
-        return _run_dance(job, None, t_start, status, sim_progress, show_render_progress)
-    from quaddance.play.video import VideoRenderer
+    pending = _analyse_in_background(job)
+    try:
+        if not job.video:
+            return _run_dance(
+                job, None, pending, t_start, status, sim_progress, show_render_progress
+            )
+        from quaddance.play.video import VideoRenderer
 
-    with VideoRenderer(None, job.width, job.height) as renderer:
-        return _run_dance(job, renderer, t_start, status, sim_progress, show_render_progress)
+        with VideoRenderer(None, job.width, job.height) as renderer:
+            return _run_dance(
+                job, renderer, pending, t_start, status, sim_progress, show_render_progress
+            )
+    finally:
+        if pending is not None:
+            pending.cancel()
+
+
+def _analyse_in_background(job: DanceJob) -> Future | None:
+    """The song's analysis, started in a fresh process (`DanceJob.analysis_process`)."""
+    if not (job.analysis_process and job.song is not None and job.motion is None):
+        return None
+    if not Path(job.song).is_file():
+        return None  # reported by `_run_dance`
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    from quaddance.music.analysis import analyze_file
+
+    pool = ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context("spawn"))
+    try:
+        return pool.submit(analyze_file, Path(job.song))
+    finally:
+        pool.shutdown(wait=False)  # the process ends after its one job
+
+
+def _background_result(pending: Future | None) -> Any:
+    """The analysis from `_analyse_in_background`, or None where there is none or it failed:
+    the song is then analysed here, where a bad file gets its usual one-line error."""
+    if pending is None:
+        return None
+    try:
+        return pending.result()
+    except Exception:  # any failure: redone here, where errors are reported
+        return None
 
 
 def _run_dance(
     job: DanceJob,
     renderer: VideoRenderer | None,
+    pending: Future | None,
     t_start: float,
     status: Callable[[str], None],
     sim_progress: Callable[[int, int], None] | None,
@@ -93,7 +137,6 @@ def _run_dance(
     from quaddance.play.metrics import dance_metrics, whole_body_metrics
     from quaddance.play.plots import plot_feet
     from quaddance.play.policy import OnnxPolicy, shipped_policy_path
-    from quaddance.play.rollout import rollout, save_rollout
 
     for path in (job.song, job.motion):
         if path is not None and not Path(path).is_file():
@@ -112,6 +155,8 @@ def _run_dance(
 
     status("analysing the music and choreographing")
     t0 = time.perf_counter()
+    if pending is not None:
+        import quaddance.play.rollout  # noqa: F401 - torch loads while the song is analysed
     dance, _ = make_dance(
         job.song,
         job.motion,
@@ -120,8 +165,13 @@ def _run_dance(
         target_cfg=target_config_for(policy, job.mode),
         style=job.style,
         moves=move_set,
+        analysis=_background_result(pending),
     )
     timings["choreography_s"] = time.perf_counter() - t0
+    # torch only now: imported before librosa it makes librosa's import slower (lazy_loader
+    # walks the stack with `inspect`, whose cost grows with the modules loaded).
+    from quaddance.play.rollout import rollout, save_rollout
+
     paths = {"dance": out / "dance.npz"}
     save_dance(paths["dance"], dance)
 

@@ -497,6 +497,10 @@ def _read_dataclass(r: _Reader, value: Any, default: Any, name: str) -> dict[str
         elif isinstance(like, float):
             lo, hi = _TASK_BOUNDS.get(bound, (-_BIG, _BIG))
             out[key] = r.number(obj, key, lo, hi, name + ".")
+        elif isinstance(like, tuple) and all(isinstance(x, str) for x in like) and like:
+            if not isinstance(value, list | tuple) or len(value) > 32:
+                r.fail(dotted, "must be a list of at most 32 names")
+            out[key] = [r.text({key: v}, key, 100, name + ".") for v in value]
         elif isinstance(like, tuple):
             lo, hi = _TASK_BOUNDS.get(bound, (-_BIG, _BIG))
             n = len(like) if key != "preview_s" else None

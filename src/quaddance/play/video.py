@@ -50,8 +50,10 @@ ModelSource = mujoco.MjModel | Callable[[], mujoco.MjModel] | None
 """A model to render, or a zero-argument function that builds one; None means the dance scene
 with its visual meshes (`quaddance.sim.scene.build_model(visual=True)`)."""
 
-VIDEO_FPS = 30.0
-"""Frame rate of the videos, Hz."""
+VIDEO_FPS = 25.0
+"""Frame rate of the videos, Hz. 25 divides the 50 Hz policy rate (each frame is a simulated
+pose, none interpolated) and draws a sixth fewer frames than 30: rendering is most of the
+`dance` command's CPU time on 2 cores (`quaddance bench dance`)."""
 
 EGL_PACKAGES = "libegl1 libegl-mesa0 libgl1-mesa-dri"
 """Debian packages that headless EGL rendering on the CPU needs."""

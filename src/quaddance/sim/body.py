@@ -37,12 +37,11 @@ def leg_ik(foot_b: torch.Tensor, geom: LegGeometry) -> torch.Tensor:
     is lateral and both links point straight down at zero angle, as `leg_geometry` checks).
     Out-of-reach points are pulled onto the workspace boundary instead of giving NaN.
     """
-    dt, dev = foot_b.dtype, foot_b.device
-    t = lambda a: torch.as_tensor(a, dtype=dt, device=dev)  # noqa: E731
-    ty = t(geom.thigh_offset[:, 1])  # (4,) +-0.08 m: left legs +
-    l2 = -t(geom.calf_offset[:, 2])  # thigh link length
-    l3 = -t(geom.foot_offset[:, 2])  # calf link length
-    d = foot_b - t(geom.hip_pos_b)
+    t = lambda name: geom.tensor(name, foot_b)  # noqa: E731
+    ty = t("thigh_offset")[:, 1]  # (4,) +-0.08 m: left legs +
+    l2 = -t("calf_offset")[:, 2]  # thigh link length
+    l3 = -t("foot_offset")[:, 2]  # calf link length
+    d = foot_b - t("hip_pos_b")
     dy, dz = d[..., 1], d[..., 2]
     # Hip: the leg plane sits ty to the side; the foot is at depth vz below the hip in it.
     vz = -(dy**2 + dz**2 - ty**2).clamp(min=1e-6).sqrt()
@@ -54,9 +53,8 @@ def leg_ik(foot_b: torch.Tensor, geom: LegGeometry) -> torch.Tensor:
     phi = torch.atan2(-vx, -vz)  # direction of the foot from straight down
     thigh = phi - torch.atan2(l3 * torch.sin(calf), l2 + l3 * torch.cos(calf))
     q_task = torch.stack([hip, thigh, calf], -1)  # (N, 4 feet, 3)
-    out = torch.empty(foot_b.shape[0], go1.NUM_JOINTS, dtype=dt, device=dev)
-    cols = torch.as_tensor(geom.joint_cols.reshape(-1), device=dev)
-    out[:, cols] = q_task.reshape(-1, go1.NUM_JOINTS)
+    out = torch.empty(foot_b.shape[0], go1.NUM_JOINTS, dtype=foot_b.dtype, device=foot_b.device)
+    out[:, t("joint_cols").reshape(-1)] = q_task.reshape(-1, go1.NUM_JOINTS)
     return out
 
 

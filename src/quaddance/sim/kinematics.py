@@ -31,6 +31,23 @@ class LegGeometry:
     foot_offset: np.ndarray  # (4, 3) foot sphere centre relative to the calf body
     joint_cols: np.ndarray  # (4, 3) hip, thigh, calf columns in model joint order
 
+    @functools.cached_property
+    def _tensors(self) -> dict:
+        return {}
+
+    def tensor(self, name: str, like: torch.Tensor) -> torch.Tensor:
+        """Field ``name`` as a tensor of ``like``'s dtype and device, made once: these
+        functions run every policy step, where converting the arrays each time was a tenth
+        of playback's simulation time."""
+        key = (name, like.dtype, like.device)
+        out = self._tensors.get(key)
+        if out is None:
+            dtype = torch.long if name == "joint_cols" else like.dtype
+            with torch.inference_mode(False):  # usable in and out of inference mode
+                out = torch.as_tensor(getattr(self, name), dtype=dtype, device=like.device)
+            self._tensors[key] = out
+        return out
+
 
 @functools.lru_cache(maxsize=4)
 def leg_geometry(scene: SceneCfg = SceneCfg()) -> LegGeometry:
@@ -75,12 +92,11 @@ def _rot_y(angle: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
 def foot_pos_b(joint_pos: torch.Tensor, geom: LegGeometry) -> torch.Tensor:
     """(N, 12) joint angles, model order, rad -> (N, 4, 3) foot sphere centres in the trunk
     frame, m, task foot order."""
-    dev, dt = joint_pos.device, joint_pos.dtype
-    t = lambda a: torch.as_tensor(a, dtype=dt, device=dev)  # noqa: E731
-    q = joint_pos[:, torch.as_tensor(geom.joint_cols.reshape(-1), device=dev)].reshape(-1, 4, 3)
-    p = t(geom.calf_offset) + _rot_y(q[..., 2], t(geom.foot_offset).expand(q.shape[0], 4, 3))
-    p = t(geom.thigh_offset) + _rot_y(q[..., 1], p)
-    return t(geom.hip_pos_b) + _rot_x(q[..., 0], p)
+    t = lambda name: geom.tensor(name, joint_pos)  # noqa: E731
+    q = joint_pos[:, t("joint_cols").reshape(-1)].reshape(-1, 4, 3)
+    p = t("calf_offset") + _rot_y(q[..., 2], t("foot_offset").expand(q.shape[0], 4, 3))
+    p = t("thigh_offset") + _rot_y(q[..., 1], p)
+    return t("hip_pos_b") + _rot_x(q[..., 0], p)
 
 
 def estimate_foot_height_m(

@@ -113,6 +113,10 @@ class DanceEnv:
             bank_t = torch.cat([bank_t, torch.zeros(*bank_t.shape[:2], BODY_DIM)], dim=2)
         self.bank = bank_t.to(dev)
         self.random_start = random_start
+        # Training's curriculum (0: the paws-only task, 1: the full one) scales the body
+        # targets, which everything reads through `body_targets_at` (observation, rewards,
+        # feed-forward), and the reward terms of `RewardCfg.curriculum_terms`.
+        self.curriculum_scale = 1.0
         # The actor's observation: the same builder as the robot runner's (deploy/).
         self.actor_obs = observations.ActorObservation(cfg, cfg.num_envs, dev)
         self.preview_steps = self.actor_obs.preview_steps
@@ -164,7 +168,8 @@ class DanceEnv:
     def body_targets_at(self, ahead_steps: int) -> torch.Tensor:
         """(N, 4) body targets (height offset m, roll, pitch, yaw rad) `ahead_steps` from now;
         zeros for a paws-only dance."""
-        return self._bank_at(ahead_steps)[:, 4:]
+        body = self._bank_at(ahead_steps)[:, 4:]
+        return body if self.curriculum_scale == 1.0 else body * self.curriculum_scale
 
     # --- VecEnv interface ----------------------------------------------------------------------
     def get_observations(self):
@@ -249,6 +254,8 @@ class DanceEnv:
         table = {**rewards.TERMS, **rewards.BODY_TERMS} if self.cfg.whole_body else rewards.TERMS
         for name, (fn, weight_attr) in table.items():
             w = 1.0 if weight_attr is None else getattr(cfg, weight_attr)
+            if name in cfg.curriculum_terms:
+                w *= self.curriculum_scale
             if w == 0.0:
                 continue
             value = w * fn(self) * dt
