@@ -249,12 +249,21 @@ def test_error_line_is_one_short_line() -> None:
 # --- Ctrl-C and SIGTERM -------------------------------------------------------------------------
 
 
-def _interrupt(args: list[str], sig: int, delay_s: float, wait_for: str | None = None):
+def _interrupt(
+    args: list[str], sig: int, delay_s: float, wait_for: str | None = None, group: bool = False
+):
     """Run ``quaddance ARGS``, send ``sig`` ``delay_s`` after it starts (or after it prints
-    ``wait_for`` on stderr); return (returncode, stderr)."""
+    ``wait_for`` on stderr); return (returncode, stderr). ``group``: to its whole process
+    group, helpers included, as Ctrl-C in a terminal does."""
     cmd = [sys.executable, "-c", "from quaddance.cli import main; main()", *args]
     env = {**os.environ, "COLUMNS": "200"}
-    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, env=env)
+    proc = subprocess.Popen(
+        cmd,
+        stderr=subprocess.PIPE,
+        stdout=subprocess.DEVNULL,
+        env=env,
+        start_new_session=group,
+    )
     err = b""
     if wait_for is not None:
         while wait_for.encode() not in err:
@@ -263,7 +272,10 @@ def _interrupt(args: list[str], sig: int, delay_s: float, wait_for: str | None =
                 break
             err += line
     time.sleep(delay_s)
-    proc.send_signal(sig)
+    if group:
+        os.killpg(proc.pid, sig)
+    else:
+        proc.send_signal(sig)
     _, rest = proc.communicate(timeout=120)
     return proc.returncode, (err + rest).decode(errors="replace")
 
@@ -291,6 +303,16 @@ def test_interrupted_choreograph_leaves_a_complete_dance_or_none(tmp_path, demo_
     _check_interrupted(code, stderr, sig, tmp_path)
     if out.exists():
         load_dance(out)
+
+
+@pytest.mark.parametrize("delay_s", [1.0, 2.5])
+def test_ctrl_c_to_the_process_group_while_the_helpers_work(tmp_path, demo_song, delay_s):
+    """A terminal's Ctrl-C reaches `dance`'s helper processes too (the song's analysis, the
+    render workers): one line, exit 130, no traceback from any of them."""
+    args = ["dance", str(demo_song[0]), "--out", str(tmp_path / "out")]
+    code, stderr = _interrupt(args, signal.SIGINT, delay_s, group=True)
+    _check_interrupted(code, stderr, signal.SIGINT, tmp_path)
+    assert code == EXIT_SIGINT  # the 30 s song takes longer than this
 
 
 def test_interrupted_dance_leaves_complete_outputs(tmp_path, demo_song) -> None:

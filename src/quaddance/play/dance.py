@@ -104,11 +104,13 @@ def _analyse_in_background(job: DanceJob) -> Future | None:
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
+    from quaddance.children import sigint_ignored_by_children
     from quaddance.music.analysis import analyze_file
 
     pool = ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context("spawn"))
     try:
-        return pool.submit(analyze_file, Path(job.song))
+        with sigint_ignored_by_children():  # the process starts at submit
+            return pool.submit(analyze_file, Path(job.song))
     finally:
         pool.shutdown(wait=False)  # the process ends after its one job
 

@@ -41,6 +41,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from quaddance.children import sigint_ignored_by_children
 from quaddance.errors import InputFileError, QuaddanceError
 from quaddance.fileio import atomic_path, write_json
 from quaddance.play.metrics import gaussian_smooth
@@ -502,7 +503,8 @@ class VideoRenderer:
                 jobs = ctx.Queue()
                 out = ctx.Queue(maxsize=_FRAMES_AHEAD)
                 proc = ctx.Process(target=_worker, args=(spec, jobs, out, startup), daemon=True)
-                proc.start()
+                with sigint_ignored_by_children():  # the caller handles Ctrl-C
+                    proc.start()
                 self._jobs.append(jobs)
                 self._outs.append(out)
                 self._procs.append(proc)
