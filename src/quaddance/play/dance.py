@@ -73,8 +73,9 @@ def run_dance(
 ) -> DanceOutputs:
     """Run the whole pipeline; every output is written atomically into `job.out_dir`.
 
-    With video, the render workers are started first, before the heavy imports (torch,
-    librosa), so that their start-up (model, EGL context) overlaps the music analysis and
+    Helpers start first, before the heavy imports: the song's analysis in its own process
+    (with ``job.analysis_process``), while this one loads torch and the policy, and with
+    video the render workers, whose start-up (model, EGL context) overlaps the analysis and
     the simulation; feet.png is drawn while the video renders.
     """
     t_start = time.perf_counter()
