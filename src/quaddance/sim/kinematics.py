@@ -36,9 +36,8 @@ class LegGeometry:
         return {}
 
     def tensor(self, name: str, like: torch.Tensor) -> torch.Tensor:
-        """Field ``name`` as a tensor of ``like``'s dtype and device, made once: these
-        functions run every policy step, where converting the arrays each time was a tenth
-        of playback's simulation time."""
+        """Field ``name`` as a tensor of ``like``'s dtype and device, made once per dtype and
+        device instead of at every call (the kinematics run every policy step)."""
         key = (name, like.dtype, like.device)
         out = self._tensors.get(key)
         if out is None:
