@@ -13,7 +13,8 @@ from __future__ import annotations
 import contextlib
 import signal
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from typing import Any
 
 
 @contextlib.contextmanager
@@ -28,3 +29,78 @@ def sigint_ignored_by_children() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+class HelperProcess:
+    """A fresh ('spawn') process that runs functions for this one, one call at a time.
+
+    What multiprocessing's pool would do, with two differences that a one-off command needs
+    (`dance`): it talks over a pipe, so there is no semaphore for the resource tracker to
+    report as leaked when the command ends with `os._exit`; and it ends with `os._exit`
+    itself when told to stop (or when this process is gone), skipping an interpreter
+    teardown that takes it most of a second with librosa loaded.
+
+    ``fn`` and its arguments and results travel pickled between two processes of this
+    program, never from a file.
+    """
+
+    def __init__(self) -> None:
+        import multiprocessing as mp
+
+        ctx = mp.get_context("spawn")
+        self._conn, child_conn = ctx.Pipe()
+        self._proc = ctx.Process(target=_helper_main, args=(child_conn,), daemon=True)
+        with sigint_ignored_by_children():
+            self._proc.start()
+        child_conn.close()
+        self._waiting = 0  # calls sent whose answers are not read yet
+
+    def submit(self, fn: Callable[..., Any], **kwargs: Any) -> None:
+        """Start ``fn(**kwargs)`` there; `result` returns it. Calls run in order."""
+        self._conn.send((fn, kwargs))
+        self._waiting += 1
+
+    def result(self) -> Any:
+        """The oldest unread call's value; raises `HelperError` where it raised there or
+        the helper died."""
+        if self._waiting == 0:
+            raise HelperError("no call is waiting for its result")
+        self._waiting -= 1
+        try:
+            ok, value = self._conn.recv()
+        except (EOFError, OSError) as err:
+            raise HelperError(f"the helper process ended ({err or 'no answer'})") from None
+        if not ok:
+            raise HelperError(value)
+        return value
+
+    def call(self, fn: Callable[..., Any], **kwargs: Any) -> Any:
+        self.submit(fn, **kwargs)
+        return self.result()
+
+    def close(self) -> None:
+        """Tell it to stop (it ends on its own); does not wait."""
+        with contextlib.suppress(OSError, ValueError):
+            self._conn.send(None)
+        self._conn.close()
+
+
+class HelperError(Exception):
+    """A `HelperProcess` call raised, or the process died; the message says which."""
+
+
+def _helper_main(conn: Any) -> None:
+    import os
+    import traceback
+
+    code = 0
+    try:
+        while (job := conn.recv()) is not None:
+            fn, kwargs = job
+            try:
+                conn.send((True, fn(**kwargs)))
+            except Exception as err:  # raised by fn, or its value would not pickle
+                conn.send((False, f"{type(err).__name__}: {err}\n{traceback.format_exc()}"))
+    except (EOFError, OSError):
+        code = 1  # the caller is gone
+    os._exit(code)

@@ -77,12 +77,11 @@ COLOURS = ("tab:red", "tab:green", "tab:blue")
 def plot_compare(path: Path, curves: dict[str, Path], standing_m: float) -> Path:
     """Front-foot error and rear lift of each labelled run over the env steps of the first
     one, with the standing-still error as a line."""
-    from quaddance.play.plots import _pyplot, _save  # the project's headless, atomic savefig
+    from quaddance.play.plots import _save, subplots  # the project's headless, atomic savefig
 
-    plt = _pyplot()
     cols_by_name = {name: read_curve(p) for name, p in curves.items()}
     end = next(iter(cols_by_name.values()))["env_steps"][-1]
-    fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    fig, axes = subplots(2, 1, figsize=(8, 6), sharex=True)
     for (label, cols), colour in zip(cols_by_name.items(), COLOURS, strict=False):
         keep = cols["env_steps"] <= end
         steps_m = cols["env_steps"][keep] / 1e6

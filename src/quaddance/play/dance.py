@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from concurrent.futures import Future
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -43,9 +42,10 @@ class DanceJob:
     target_markers: bool = True
     style: str = "mixed"  # choreography style
     moves: Path | None = None  # a --moves TOML file of extra body moves and styles
-    # Analyse the song in a second process while this one loads torch and the policy: for a
-    # one-off command (`quaddance dance`) in a fresh process, where both imports are start-up
-    # cost; not for loops over many songs (eval), which import librosa once.
+    # Analyse the song (then choreograph, and compute the beat metrics) in a second process
+    # while this one loads torch and the policy: for a one-off command (`quaddance dance`) in
+    # a fresh process, where the imports are start-up cost; not for loops over many songs
+    # (eval), which import librosa once.
     analysis_process: bool = False
 
 
@@ -73,13 +73,13 @@ def run_dance(
 ) -> DanceOutputs:
     """Run the whole pipeline; every output is written atomically into `job.out_dir`.
 
-    Helpers start first, before the heavy imports: the song's analysis in its own process
-    (with ``job.analysis_process``), while this one loads torch and the policy, and with
-    video the render workers, whose start-up (model, EGL context) overlaps the analysis and
-    the simulation; feet.png is drawn while the video renders.
+    Helpers start first, before the heavy imports: with ``job.analysis_process`` a second
+    process (`_Helper`) analyses the song and then choreographs while this one loads torch
+    and the policy, and with video the render workers, whose start-up (model, EGL context)
+    overlaps the analysis and the simulation; feet.png is drawn while the video renders.
     """
     t_start = time.perf_counter()
-    pending = _analyse_in_background(job)
+    pending = _Helper.start(job)
     try:
         if not job.video:
             return _run_dance(
@@ -93,51 +93,68 @@ def run_dance(
             )
     finally:
         if pending is not None:
-            pending.cancel()
+            pending.close()
 
 
-def _analyse_in_background(job: DanceJob) -> Future | None:
-    """The song's analysis, started in a fresh process (`DanceJob.analysis_process`)."""
-    if not (job.analysis_process and job.song is not None and job.motion is None):
-        return None
-    if not Path(job.song).is_file():
-        return None  # reported by `_run_dance`
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor
+class _Helper:
+    """A second process for the numpy/scipy work of `dance` (see
+    `DanceJob.analysis_process`): the song's analysis starts at once, before this process
+    imports torch; the choreography (which needs the policy's target range) and the beat
+    metrics follow in the same process, where scipy is already loaded (importing
+    scipy.signal costs this process 1.5 s CPU, measured)."""
 
-    from quaddance.children import sigint_ignored_by_children
-    from quaddance.music.analysis import analyze_file
+    def __init__(self, song: Path) -> None:
+        from quaddance.children import HelperProcess
+        from quaddance.music.analysis import analyze_file
 
-    pool = ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context("spawn"))
-    try:
-        with sigint_ignored_by_children():  # the process starts at submit
-            return pool.submit(analyze_file, Path(job.song))
-    finally:
-        pool.shutdown(wait=False)  # the process ends after its one job
+        self.proc = HelperProcess()
+        self.proc.submit(analyze_file, path=song)
+
+    @classmethod
+    def start(cls, job: DanceJob) -> _Helper | None:
+        if not (job.analysis_process and job.song is not None and job.motion is None):
+            return None
+        if not Path(job.song).is_file():
+            return None  # reported by `_run_dance`
+        return cls(Path(job.song))
+
+    def analysis(self) -> Any:
+        return self._answer()
+
+    def run(self, fn: Callable[..., Any], **kwargs: Any) -> Any:
+        """``fn(**kwargs)`` in the helper; None where it failed there: the caller then does
+        the work itself, where a bad file gets its usual one-line error."""
+        self.proc.submit(fn, **kwargs)
+        return self._answer()
+
+    def _answer(self) -> Any:
+        from quaddance.children import HelperError
+
+        try:
+            return self.proc.result()
+        except HelperError:
+            return None
+
+    def close(self) -> None:
+        self.proc.close()
 
 
-def _background_result(pending: Future | None) -> Any:
-    """The analysis from `_analyse_in_background`, or None where there is none or it failed:
-    the song is then analysed here, where a bad file gets its usual one-line error."""
-    if pending is None:
-        return None
-    try:
-        return pending.result()
-    except Exception:  # any failure: redone here, where errors are reported
-        return None
+def _make_dance(**kwargs: Any) -> Dance:
+    from quaddance.pipeline import make_dance
+
+    return make_dance(**kwargs)[0]
 
 
 def _run_dance(
     job: DanceJob,
     renderer: VideoRenderer | None,
-    pending: Future | None,
+    pending: _Helper | None,
     t_start: float,
     status: Callable[[str], None],
     sim_progress: Callable[[int, int], None] | None,
     show_render_progress: bool,
 ) -> DanceOutputs:
-    from quaddance.pipeline import make_dance
-    from quaddance.play.metrics import dance_metrics, whole_body_metrics
+    from quaddance.play.metrics import body_and_coverage, dance_metrics
     from quaddance.play.plots import plot_feet
     from quaddance.play.policy import OnnxPolicy, shipped_policy_path
 
@@ -160,16 +177,22 @@ def _run_dance(
     t0 = time.perf_counter()
     if pending is not None:
         import quaddance.play.rollout  # noqa: F401 - torch loads while the song is analysed
-    dance, _ = make_dance(
-        job.song,
-        job.motion,
+    how = dict(
+        song=job.song,
+        motion=job.motion,
         mode=job.mode,
         seed=job.seed,
         target_cfg=target_config_for(policy, job.mode),
         style=job.style,
         moves=move_set,
-        analysis=_background_result(pending),
     )
+    dance = None
+    if pending is not None and (analysis := pending.analysis()) is not None:
+        dance = pending.run(_make_dance, analysis=analysis, **how)
+    if dance is None:
+        from quaddance.pipeline import make_dance
+
+        dance, _ = make_dance(**how)
     timings["choreography_s"] = time.perf_counter() - t0
     # torch only now: imported before librosa it makes librosa's import slower (lazy_loader
     # walks the stack with `inspect`, whose cost grows with the modules loaded).
@@ -247,9 +270,15 @@ def _run_dance(
         render_time_s=render_s,
         feasible_max_m=target_config_for(policy, "feasible").max_height_m,
     )
-    metrics.update(
-        whole_body_metrics(result, dance.beats_s, policy.task.rewards.base_height_target_m)
+    arrays = dict(
+        time_s=result.time_s,
+        feet_m=result.feet_m,
+        body_targets=result.body_targets,
+        body_measured=measured,
+        beats_s=dance.beats_s,
     )
+    beat_metrics = pending.run(body_and_coverage, **arrays) if pending is not None else None
+    metrics.update(beat_metrics or body_and_coverage(**arrays))
     if dance.clamp_report is not None:
         metrics["clamped"] = dance.clamp_report
     timings["total_s"] = time.perf_counter() - t_start

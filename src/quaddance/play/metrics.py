@@ -379,12 +379,18 @@ def whole_body_metrics(result, beats_s, standing_height_m: float) -> dict[str, A
     """metrics.json's ``body`` (trunk tracking, `play.metrics.body_metrics`) and
     ``beat_coverage`` (fraction of beats with a motion accent of the robot, paws or trunk, as
     measured in the simulator, within +-100 ms). `dance`, `deploy` and `live` all use it."""
+    measured = result.body_measured(standing_height_m)
+    return body_and_coverage(result.time_s, result.feet_m, result.body_targets, measured, beats_s)
+
+
+def body_and_coverage(time_s, feet_m, body_targets, body_measured, beats_s) -> dict[str, Any]:
+    """`whole_body_metrics` over plain arrays (what `dance` sends to its helper process):
+    ``feet_m`` (T, 4) measured foot heights, ``body_targets`` and ``body_measured`` (T, 4)."""
     from quaddance.choreo.accents import beat_coverage, motion_accents_s
 
-    measured = result.body_measured(standing_height_m)
-    accents = motion_accents_s(result.time_s, result.feet_m, measured)
+    accents = motion_accents_s(time_s, feet_m, body_measured)
     return {
-        "body": body_metrics(result.body_targets, measured),
+        "body": body_metrics(body_targets, body_measured),
         # None without music beats (a motion file alone): nothing to cover.
         "beat_coverage": beat_coverage(accents, beats_s) if len(beats_s) else None,
     }

@@ -1,0 +1,43 @@
+"""`quaddance.children.HelperProcess`: calls, failures, and a helper that ends on its own."""
+
+from __future__ import annotations
+
+import statistics
+import textwrap
+import time
+
+import pytest
+
+from quaddance.children import HelperError, HelperProcess
+
+
+def _wait_dead(helper: HelperProcess, timeout_s: float = 20.0) -> bool:
+    end = time.monotonic() + timeout_s
+    while helper._proc.is_alive() and time.monotonic() < end:
+        time.sleep(0.05)
+    return not helper._proc.is_alive()
+
+
+def test_calls_run_in_order_and_failures_are_reported():
+    helper = HelperProcess()
+    try:
+        helper.submit(statistics.mean, data=[1, 2, 6])
+        helper.submit(textwrap.dedent, text="  a")
+        assert helper.result() == 3
+        assert helper.result() == "a"
+        with pytest.raises(HelperError, match="StatisticsError"):
+            helper.call(statistics.mean, data=[])
+        assert helper.call(statistics.median, data=[5]) == 5  # it lives on after a failure
+        with pytest.raises(HelperError, match="no call"):
+            helper.result()
+    finally:
+        helper.close()
+    assert _wait_dead(helper)
+    assert helper._proc.exitcode == 0
+
+
+def test_a_helper_ends_when_its_caller_goes_away():
+    helper = HelperProcess()
+    helper._conn.close()  # as when the caller's process ends without a word
+    assert _wait_dead(helper)
+    assert helper._proc.exitcode == 1
