@@ -352,3 +352,23 @@ def test_tracker_stays_unlocked_in_silence_and_noise() -> None:
 def test_tracker_rejects_another_sample_rate() -> None:
     with pytest.raises(ValueError, match="22050"):
         OnlineBeatTracker(sr_hz=44100)
+
+
+def test_tracker_keeps_the_true_tempo_through_syncopation_and_after_a_break() -> None:
+    """`bench live`'s live_128_break_phase: 128 BPM throughout. The syncopated first part's
+    3+3+2 accents pull the tempo estimate to 2/3 (85 BPM), which the locked tracker must not
+    follow (`HELD_LEVEL_RATIOS`); after 2.2 s of silence the second part is first heard at
+    half tempo (64 BPM), until its snare backbeat doubles it (`BACKBEAT_RATIO`)."""
+    from quaddance.bench.live import live_songs
+
+    song = next(s for s in live_songs(SR_HZ) if s.name == "live_128_break_phase")
+    events, locks, tracker = _track(song.y)
+    part2_s = song.music_starts_s[1]
+    part1 = [bpm for t, locked, bpm in locks if locked and t < part2_s - 2.2]
+    assert _first_lock_s(locks) <= 6.0
+    assert part1 and all(bpm == pytest.approx(128.0, rel=0.03) for bpm in part1)
+    assert tracker.state.tempo_bpm == pytest.approx(128.0, rel=0.03)
+    late = [e for e in events if e.time_s >= song.beats_s[-1] - 4.0]
+    assert len(late) >= 7  # 4 s of beats at 128 BPM, not at 64
+    errors = _errors_s(events, song.beats_s, song.beats_s[-1] - 4.0, song.beats_s[-1])
+    assert errors.max() <= HIT_WINDOW_S

@@ -12,8 +12,8 @@ The tracker sees the audio block by block and never looks ahead. Per 11.6 ms fra
    by an online Viterbi filter over a log-tempo grid: tempo drifts cheaply and jumps at a fixed
    cost; a recent-weighted window lets a tempo change win within a few seconds, and the beat
    score is then recomputed on the new period so the beats move onto the new grid at once.
-   Once locked, the metrical level is held: a filter tempo of double or half the locked one
-   (the same beats, or every other one) keeps the tempo at the locked level.
+   Once locked, the metrical level is held: a filter tempo of double, half, 3/2 or 2/3 of the
+   locked one (``HELD_LEVEL_RATIOS``) keeps the tempo at the locked level.
 3. Beat phase with a cumulative beat score (Ellis' dynamic program run forwards, as in Stark's
    real-time BTrack): each frame scores its onset plus the best score one beat period back.
    Half-way between beats the score is projected one period ahead and the next beat is
@@ -132,6 +132,23 @@ SUPPORT_RADIUS = 3
 """A beat is supported by an onset peak within this many frames (+-35 ms)."""
 UNLOCK_MISSES = 4
 """Unsupported beats in a row that lose the lock (a break without drums keeps it a while)."""
+HELD_LEVEL_RATIOS = (2.0, 1.5)
+"""Once locked, a tempo this many times the locked one, or this fraction of it, is the same
+music heard at another metrical level, and the reported tempo stays (item 2): double or half
+(every beat, or every other one, stays on the grid), and 3:2, the cross-rhythm of syncopated
+parts (3+3+2 accents of eighth notes) that a syncopated groove pulls the autocorrelation
+towards. A real tempo change by one of these ratios loses the lock once the old grid goes
+unsupported (``UNLOCK_MISSES``), and is followed then."""
+BACKBEAT_BEATS = 4
+"""Scored beats (3 intervals) the backbeat test (item 2) looks at."""
+BACKBEAT_RATIO = 0.75
+BACKBEAT_CONTRAST = 1.5
+MAX_DOUBLED_BPM = 165.0
+"""The backbeat test, as the offline analyser's (`AnalysisConfig.backbeat_ratio`,
+``backbeat_contrast``, ``max_doubled_bpm``): the tempo doubles when the midpoints between the
+beats carry hits at least ``BACKBEAT_RATIO`` as strong as the beats and ``BACKBEAT_CONTRAST``
+times the quarter-beat positions (a snare backbeat heard at half tempo), while the doubled
+tempo stays at most ``MAX_DOUBLED_BPM``."""
 STEADY_TEMPO_RATIO = 1.04
 """Tempo counts as steady when it stays within this ratio over the lock's beats."""
 PHASE_JUMP_BEATS = 0.25
@@ -448,6 +465,7 @@ class OnlineBeatTracker:
         self._bar_phase = 0  # index (mod 4) of the beats that are downbeats
         self._beat_offset = 0.0  # reported beats follow the score's beats by this, periods
         self._locked = False
+        self._doubled = False  # the backbeat test doubled the filter's tempo (item 2)
         self._misses = 0
         self._last_beat_s = float("nan")
         self._heard_frames = 0
@@ -564,17 +582,18 @@ class OnlineBeatTracker:
             self._viterbi = np.max(self._viterbi[:, None] + self._trans, axis=0) + emis
             self._viterbi -= self._viterbi.max()
         best = int(np.argmax(self._viterbi))
+        if self._doubled and self._period > 0 and not self._locked:
+            best = self._at_level(best, np.log(60.0 * self._fps / self._period))
         if self._locked and self._period > 0:
-            # Metrical level hold: once locked, a tempo of double or half the locked one puts
-            # beats on the same grid (every beat, or every other one, stays), so it is the same
-            # music heard at another level, not a tempo change; the reported tempo stays at the
-            # locked level (the best tempo near it), as a dancer keeps the step tempo it chose.
-            # A real tempo change (other ratios) or a lost lock lets the filter's best through.
-            here = np.log(60.0 * self._fps / self._period)
-            tol = np.log(STEADY_TEMPO_RATIO)
-            if abs(abs(self._log_bpm[best] - here) - np.log(2.0)) <= tol:
-                near = np.abs(self._log_bpm - here) <= tol
-                best = int(np.flatnonzero(near)[np.argmax(self._viterbi[near])])
+            # Metrical level hold: once locked, a tempo at another metrical level of the locked
+            # one (`HELD_LEVEL_RATIOS`) is the same music heard another way, not a tempo
+            # change; the reported tempo stays at the locked level (the best tempo near it), as
+            # a dancer keeps the step tempo it chose. A real tempo change (other ratios) or a
+            # lost lock lets the filter's best through.
+            best = self._at_level(best, np.log(60.0 * self._fps / self._period))
+        if self._backbeat_double(float(periods[best])):
+            best = self._best_near(self._log_bpm[best] + np.log(2.0))
+            self._doubled = True
         # How clearly the chosen tempo is periodic, in standard errors (1 / sqrt(n)) of the
         # autocorrelation of n frames of white noise.
         self._periodicity = float(raw_sal[best]) * np.sqrt(len(onset))
@@ -590,6 +609,43 @@ class OnlineBeatTracker:
             # A new period: the offset found on the old one no longer applies (while locked,
             # the hold below keeps the reported grid continuous across the change).
             self._beat_offset = 0.0
+
+    def _best_near(self, log_bpm: float) -> int:
+        """The filter's best tempo within `STEADY_TEMPO_RATIO` of ``log_bpm``."""
+        near = np.abs(self._log_bpm - log_bpm) <= np.log(STEADY_TEMPO_RATIO)
+        if not near.any():
+            return int(np.argmin(np.abs(self._log_bpm - log_bpm)))
+        return int(np.flatnonzero(near)[np.argmax(self._viterbi[near])])
+
+    def _at_level(self, best: int, here: float) -> int:
+        """``best``, or the best tempo near ``here`` (log BPM) where ``best`` is ``here`` at
+        another metrical level (`HELD_LEVEL_RATIOS`); a tempo change of any other size ends
+        a backbeat doubling."""
+        ratio = abs(self._log_bpm[best] - here)
+        if any(abs(ratio - np.log(r)) <= np.log(STEADY_TEMPO_RATIO) for r in HELD_LEVEL_RATIOS):
+            return self._best_near(here)
+        if ratio > np.log(STEADY_TEMPO_RATIO):
+            self._doubled = False
+        return best
+
+    def _backbeat_double(self, period: float) -> bool:
+        """Whether the last `BACKBEAT_BEATS` scored beats, at about ``period`` (frames), show
+        a snare backbeat heard at half tempo (see `BACKBEAT_RATIO`)."""
+        if 60.0 * self._fps / period * 2.0 > MAX_DOUBLED_BPM:
+            return False
+        frames = [f - self._hist_start - 1 for f in self._beat_frames[-BACKBEAT_BEATS:]]
+        periods = self._period_at_beats[-BACKBEAT_BEATS:]
+        if len(frames) < BACKBEAT_BEATS or frames[0] < 1:
+            return False
+        if max(abs(np.log(np.asarray(periods) / period))) > np.log(STEADY_TEMPO_RATIO):
+            return False
+        onset = np.asarray(self._onset_b)
+        # A hit may land a frame off the interpolated position: take the local maximum.
+        hit = np.max([onset[:-2], onset[1:-1], onset[2:]], axis=0)
+        starts = np.asarray(frames[:-1], dtype=float) - 1.0  # indices into `hit`
+        pos = starts[:, None] + np.array([0.0, 0.25, 0.5, 0.75])[None, :] * np.diff(frames)[:, None]
+        beat, q1, mid, q3 = np.interp(pos, np.arange(len(hit)), hit).mean(axis=0)
+        return bool(mid >= BACKBEAT_RATIO * beat and mid >= BACKBEAT_CONTRAST * max(q1, q3))
 
     def _rebuild_cumscore(self) -> None:
         """Recompute the cumulative beat score over the history with the new period: scores
