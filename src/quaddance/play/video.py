@@ -331,6 +331,9 @@ class _WorkerSpec:
     worker: int
     n_workers: int
     model_path: Path | None  # a model saved by mj_saveModel; None: build the dance scene
+    # None: where the first worker to build the dance scene saves it for the others (they
+    # start one at a time): loading it takes 0.08 s CPU, building it 0.47 s (measured).
+    built_model_path: Path | None
     width: int
     height: int
     cfg: RenderCfg
@@ -395,8 +398,13 @@ def _worker(spec: _WorkerSpec, jobs: Any, out: Any, startup: Any) -> None:
         try:
             if spec.model_path is not None:
                 model = mujoco.MjModel.from_binary_path(str(spec.model_path))
+            elif spec.built_model_path is not None and spec.built_model_path.is_file():
+                model = mujoco.MjModel.from_binary_path(str(spec.built_model_path))
             else:
                 model = _default_model()
+                if spec.built_model_path is not None and spec.n_workers > 1:
+                    with atomic_path(spec.built_model_path) as tmp:
+                        mujoco.mj_saveModel(model, str(tmp), None)
             layout = QposLayout.of(model)
             frames = FrameRenderer(model, spec.width, spec.height, spec.cfg)
             frames.render(model.qpos0)
@@ -499,7 +507,8 @@ class VideoRenderer:
         self._startup = startup = ctx.Semaphore(1)
         try:
             for i in range(workers):
-                spec = _WorkerSpec(i, workers, model_path, width, height, self.cfg)
+                built = self._tmp_dir / "scene.mjb" if model_path is None else None
+                spec = _WorkerSpec(i, workers, model_path, built, width, height, self.cfg)
                 # Unbounded: handing out frames must never hold up the simulation.
                 jobs = ctx.Queue()
                 out = ctx.Queue(maxsize=_FRAMES_AHEAD)
