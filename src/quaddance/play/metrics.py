@@ -383,7 +383,13 @@ def whole_body_metrics(result, beats_s, standing_height_m: float) -> dict[str, A
     return body_and_coverage(result.time_s, result.feet_m, result.body_targets, measured, beats_s)
 
 
-def body_and_coverage(time_s, feet_m, body_targets, body_measured, beats_s) -> dict[str, Any]:
+def body_and_coverage(
+    time_s: np.ndarray,
+    feet_m: np.ndarray,
+    body_targets: np.ndarray,
+    body_measured: np.ndarray,
+    beats_s: np.ndarray,
+) -> dict[str, Any]:
     """`whole_body_metrics` over plain arrays (what `dance` sends to its helper process):
     ``feet_m`` (T, 4) measured foot heights, ``body_targets`` and ``body_measured`` (T, 4)."""
     from quaddance.choreo.accents import beat_coverage, motion_accents_s

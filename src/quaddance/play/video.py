@@ -334,8 +334,9 @@ class _WorkerSpec:
     worker: int
     n_workers: int
     model_path: Path | None  # a model saved by mj_saveModel; None: build the dance scene
-    # None: where the first worker to build the dance scene saves it for the others (they
-    # start one at a time): loading it takes 0.08 s CPU, building it 0.47 s (measured).
+    # Where the first worker to build the dance scene saves it for the others, which start
+    # one at a time (None: each builds its own): loading it takes 0.08 s CPU, building it
+    # 0.47 s (measured).
     built_model_path: Path | None
     width: int
     height: int
