@@ -316,3 +316,12 @@ def _shipped_policy():
     from quaddance.play.policy import OnnxPolicy, shipped_policy_path
 
     return OnnxPolicy.load(shipped_policy_path())
+
+
+def test_a_misspelt_curriculum_term_is_refused():
+    from quaddance.sim.task import DanceEnv
+
+    cfg = DanceTaskCfg(whole_body=True, num_envs=1)
+    cfg.rewards.curriculum_terms = (*cfg.rewards.curriculum_terms, "body_heigth_tracking")
+    with pytest.raises(ValueError, match="no reward term named body_heigth_tracking"):
+        DanceEnv(cfg, np.zeros((1, 10, 8), np.float32), seed=0)
