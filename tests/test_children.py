@@ -41,3 +41,13 @@ def test_a_helper_ends_when_its_caller_goes_away():
     helper._conn.close()  # as when the caller's process ends without a word
     assert _wait_dead(helper)
     assert helper._proc.exitcode == 1
+
+
+def test_calls_to_a_dead_helper_are_helper_errors():
+    helper = HelperProcess()
+    helper._proc.kill()
+    helper._proc.join(timeout=20)
+    with pytest.raises(HelperError, match="ended"):
+        helper.call(statistics.mean, data=[1])
+    helper.close()
+    helper.close()  # twice is harmless

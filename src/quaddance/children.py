@@ -56,8 +56,12 @@ class HelperProcess:
         self._waiting = 0  # calls sent whose answers are not read yet
 
     def submit(self, fn: Callable[..., Any], **kwargs: Any) -> None:
-        """Start ``fn(**kwargs)`` there; `result` returns it. Calls run in order."""
-        self._conn.send((fn, kwargs))
+        """Start ``fn(**kwargs)`` there; `result` returns it. Calls run in order. Raises
+        `HelperError` where the helper has died."""
+        try:
+            self._conn.send((fn, kwargs))
+        except (OSError, ValueError) as err:  # a dead reader, or closed here
+            raise HelperError(f"the helper process ended ({err})") from None
         self._waiting += 1
 
     def result(self) -> Any:

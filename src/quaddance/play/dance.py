@@ -119,19 +119,21 @@ class _Helper:
         return cls(Path(job.song))
 
     def analysis(self) -> Any:
-        return self._answer()
+        """The song's `Analysis`; None where it failed there (see `run`)."""
+        return self._answer(self.proc.result)
 
     def run(self, fn: Callable[..., Any], **kwargs: Any) -> Any:
-        """``fn(**kwargs)`` in the helper; None where it failed there: the caller then does
-        the work itself, where a bad file gets its usual one-line error."""
-        self.proc.submit(fn, **kwargs)
-        return self._answer()
+        """``fn(**kwargs)`` in the helper; None where it failed there or the helper died:
+        the caller then does the work itself, where a bad file gets its usual one-line
+        error."""
+        return self._answer(lambda: self.proc.call(fn, **kwargs))
 
-    def _answer(self) -> Any:
+    @staticmethod
+    def _answer(get: Callable[[], Any]) -> Any:
         from quaddance.children import HelperError
 
         try:
-            return self.proc.result()
+            return get()
         except HelperError:
             return None
 
