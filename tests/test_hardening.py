@@ -510,6 +510,11 @@ def _set(meta: dict, dotted: str, value) -> None:
         ("task.domain_rand.num_variants", 10**8, "task.domain_rand.num_variants: 100000000"),
         ("task.domain_rand.friction", [3.0, 0.1], "friction: the range's low end is above"),
         ("task.rewards.form", "exp", "task.rewards.form: 'exp' is not one of paper, l2"),
+        (
+            "task.rewards.curriculum_terms",
+            ["foot_slide", "body_heigth_tracking"],
+            "'body_heigth_tracking' is no reward term; did you mean 'body_height_tracking'?",
+        ),
         ("task.scene.warp", 1, "task.scene: unknown field 'warp'"),
         ("task.front_feedforward", "yes", "task.front_feedforward: must be true or false"),
         ("front_feedforward", KeyError, "the file: missing field front_feedforward"),

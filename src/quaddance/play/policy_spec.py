@@ -16,6 +16,7 @@ files predate them); the file is written back as it was read.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import json
 import math
 from dataclasses import dataclass, field
@@ -433,6 +434,13 @@ def _sources() -> tuple[str, ...]:
     return SOURCES
 
 
+def _reward_terms() -> tuple[str, ...]:
+    # Imported here for the same reason as `_sources`.
+    from quaddance.sim.rewards import TERM_NAMES
+
+    return TERM_NAMES
+
+
 def _read_obs(r: _Reader, obj: dict) -> dict[str, Any]:
     keys = ("dim", "preview_s", "history_len", "normalization")
     # `terms` (with sources) since the robot-measurable contract; `layout` in older files.
@@ -501,6 +509,12 @@ def _read_dataclass(r: _Reader, value: Any, default: Any, name: str) -> dict[str
             if not isinstance(value, list | tuple) or len(value) > 32:
                 r.fail(dotted, "must be a list of at most 32 names")
             out[key] = [r.text({key: v}, key, 100, name + ".") for v in value]
+            if key == "curriculum_terms":
+                unknown = [v for v in out[key] if v not in _reward_terms()]
+                if unknown:
+                    near = difflib.get_close_matches(unknown[0], _reward_terms(), n=1)
+                    hint = f"; did you mean {near[0]!r}?" if near else ""
+                    r.fail(dotted, f"{unknown[0]!r} is no reward term{hint}")
         elif isinstance(like, tuple):
             lo, hi = _TASK_BOUNDS.get(bound, (-_BIG, _BIG))
             n = len(like) if key != "preview_s" else None

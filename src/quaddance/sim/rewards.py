@@ -167,3 +167,5 @@ BODY_TERMS = {
     "body_tilt_tracking": (body_tilt_tracking, None),
     "body_yaw_tracking": (body_yaw_tracking, None),
 }
+#: Every reward term's name (`RewardCfg.curriculum_terms` must name some of these).
+TERM_NAMES: tuple[str, ...] = (*TERMS, *BODY_TERMS)

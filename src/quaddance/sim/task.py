@@ -98,11 +98,11 @@ class DanceEnv:
         self._gen = torch.Generator().manual_seed(seed)
         if abs(cfg.scene.timestep_s * cfg.decimation - cfg.step_dt_s) > 1e-9:
             raise ValueError("scene.timestep_s * decimation must equal 1 / policy_hz")
-        unknown = set(cfg.rewards.curriculum_terms) - {*rewards.TERMS, *rewards.BODY_TERMS}
+        unknown = set(cfg.rewards.curriculum_terms) - set(rewards.TERM_NAMES)
         if unknown:  # a misspelt name would silently train that term at full weight
             raise ValueError(
                 f"RewardCfg.curriculum_terms: no reward term named {', '.join(sorted(unknown))}"
-                f"; the terms are {', '.join([*rewards.TERMS, *rewards.BODY_TERMS])}"
+                f"; the terms are {', '.join(rewards.TERM_NAMES)}"
             )
         variants = sample_dynamics(cfg, self._rng) if dynamics is None else np.asarray(dynamics)
         self.engine = make_engine(engine, cfg.num_envs, cfg.scene, variants)
