@@ -358,7 +358,7 @@ def test_tracker_keeps_the_true_tempo_through_syncopation_and_after_a_break() ->
     """`bench live`'s live_128_break_phase: 128 BPM throughout. The syncopated first part's
     3+3+2 accents pull the tempo estimate to 2/3 (85 BPM), which the locked tracker must not
     follow (`HELD_LEVEL_RATIOS`); after 2.2 s of silence the second part is first heard at
-    half tempo (64 BPM), until its snare backbeat doubles it (`BACKBEAT_RATIO`)."""
+    half tempo (64 BPM), until its snare backbeat doubles it (`analysis.backbeat_heard`)."""
     from quaddance.bench.live import live_songs
 
     song = next(s for s in live_songs(SR_HZ) if s.name == "live_128_break_phase")

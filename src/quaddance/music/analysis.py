@@ -501,8 +501,16 @@ def _backbeat_double(beat_frames: np.ndarray, feats: _Features, cfg: AnalysisCon
     fractions = np.array([0.0, 0.25, 0.5, 0.75])
     starts = beat_frames[:-1].astype(float)
     pos = starts[:, None] + fractions[None, :] * np.diff(beat_frames)[:, None]
-    beat, q1, mid, q3 = np.interp(pos, np.arange(len(hit)), hit).mean(axis=0)
-    return bool(mid >= cfg.backbeat_ratio * beat and mid >= cfg.backbeat_contrast * max(q1, q3))
+    return backbeat_heard(np.interp(pos, np.arange(len(hit)), hit).mean(axis=0), cfg)
+
+
+def backbeat_heard(hits: np.ndarray, cfg: AnalysisConfig) -> bool:
+    """The backbeat test on the mean hit strength at 0, 1/4, 1/2 and 3/4 of the beat (4,):
+    the midpoints carry hits about as strong as the beats (``cfg.backbeat_ratio``) and
+    clearly stronger than the quarter-beat positions (``cfg.backbeat_contrast``). Shared by
+    this analyser and the online tracker (`music.online_beats`)."""
+    beat, q1, mid, q3 = (float(h) for h in hits)
+    return mid >= cfg.backbeat_ratio * beat and mid >= cfg.backbeat_contrast * max(q1, q3)
 
 
 def _refine(beats: np.ndarray, onset: np.ndarray, radius: int = 1) -> np.ndarray:

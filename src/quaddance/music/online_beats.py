@@ -50,6 +50,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from quaddance.music.analysis import AnalysisConfig, backbeat_heard
 from quaddance.music.audio import DEFAULT_SR
 
 SR_HZ = DEFAULT_SR
@@ -145,14 +146,11 @@ BACKBEAT_PERIODS = 4
 BACKBEAT_MIN_PERIODS = 3
 """Beat periods of the recent music that the backbeat test (item 2) folds together: the last
 4, at least 3 (2 let the first second's noise through: a 60 BPM click track doubled)."""
-BACKBEAT_RATIO = 0.75
-BACKBEAT_CONTRAST = 1.5
-MAX_DOUBLED_BPM = 165.0
-"""The backbeat test, as the offline analyser's (`AnalysisConfig.backbeat_ratio`,
-``backbeat_contrast``, ``max_doubled_bpm``): the tempo doubles when the midpoints between the
-beats carry hits at least ``BACKBEAT_RATIO`` as strong as the beats and ``BACKBEAT_CONTRAST``
-times the quarter-beat positions (a snare backbeat heard at half tempo), while the doubled
-tempo stays at most ``MAX_DOUBLED_BPM``."""
+BACKBEAT_CFG = AnalysisConfig()
+"""The backbeat test's settings, the offline analyser's (`analysis.backbeat_heard`): the tempo
+doubles when the midpoints between the beats carry hits about as strong as the beats and
+clearly stronger than the quarter-beat positions (a snare backbeat heard at half tempo), while
+the doubled tempo stays at most ``BACKBEAT_CFG.max_doubled_bpm``."""
 STEADY_TEMPO_RATIO = 1.04
 """Tempo counts as steady when it stays within this ratio over the lock's beats."""
 PHASE_JUMP_BEATS = 0.25
@@ -586,14 +584,12 @@ class OnlineBeatTracker:
             self._viterbi = np.max(self._viterbi[:, None] + self._trans, axis=0) + emis
             self._viterbi -= self._viterbi.max()
         best = int(np.argmax(self._viterbi))
-        if self._doubled and self._period > 0 and not self._locked:
-            best = self._at_level(best, np.log(60.0 * self._fps / self._period))
-        if self._locked and self._period > 0:
-            # Metrical level hold: once locked, a tempo at another metrical level of the locked
-            # one (`HELD_LEVEL_RATIOS`) is the same music heard another way, not a tempo
-            # change; the reported tempo stays at the locked level (the best tempo near it), as
-            # a dancer keeps the step tempo it chose. A real tempo change (other ratios) or a
-            # lost lock lets the filter's best through.
+        if (self._locked or self._doubled) and self._period > 0:
+            # Metrical level hold: once locked (or doubled by the backbeat test), a tempo at
+            # another metrical level of the current one (`HELD_LEVEL_RATIOS`) is the same music
+            # heard another way, not a tempo change; the reported tempo stays at the current
+            # level (the best tempo near it), as a dancer keeps the step tempo it chose. A real
+            # tempo change (other ratios) or a lost lock lets the filter's best through.
             best = self._at_level(best, np.log(60.0 * self._fps / self._period))
         # The level is chosen before the lock and then held: doubling a locked tempo moved
         # every other reported beat (random11_dembow: F 0.97 -> 0.89, measured).
@@ -636,10 +632,10 @@ class OnlineBeatTracker:
 
     def _backbeat_double(self, period: float) -> bool:
         """Whether the music heard so far, folded over ``period`` (frames), shows a snare
-        backbeat heard at half tempo (see `BACKBEAT_RATIO`): the onsets are averaged at 16
+        backbeat heard at half tempo (see `BACKBEAT_CFG`): the onsets are averaged at 16
         phases of the period over its last `BACKBEAT_PERIODS` (fewer right after a restart,
         at least `BACKBEAT_MIN_PERIODS`); the strongest phase stands for the beat."""
-        if 60.0 * self._fps / period * 2.0 > MAX_DOUBLED_BPM:
+        if 60.0 * self._fps / period * 2.0 > BACKBEAT_CFG.max_doubled_bpm:
             return False
         onset = np.asarray(self._onset_b)
         n = min(BACKBEAT_PERIODS, int((len(onset) - 2) // period))
@@ -651,8 +647,7 @@ class OnlineBeatTracker:
         pos = start + period * (np.arange(n)[:, None] + np.arange(16)[None, :] / 16.0)
         profile = np.interp(pos, np.arange(len(hit)), hit).mean(axis=0)
         k = int(np.argmax(profile))
-        beat, q1, mid, q3 = profile[(k + np.array([0, 4, 8, 12])) % 16]
-        return bool(mid >= BACKBEAT_RATIO * beat and mid >= BACKBEAT_CONTRAST * max(q1, q3))
+        return backbeat_heard(profile[(k + np.array([0, 4, 8, 12])) % 16], BACKBEAT_CFG)
 
     def _rebuild_cumscore(self) -> None:
         """Recompute the cumulative beat score over the history with the new period: scores
