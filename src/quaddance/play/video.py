@@ -509,9 +509,9 @@ class VideoRenderer:
         ctx = mp.get_context("spawn")
         # Kept on self: the workers open it by name after __init__ has returned.
         self._startup = startup = ctx.Semaphore(1)
+        built = self._tmp_dir / "scene.mjb" if model_path is None else None
         try:
             for i in range(workers):
-                built = self._tmp_dir / "scene.mjb" if model_path is None else None
                 spec = _WorkerSpec(i, workers, model_path, built, width, height, self.cfg)
                 # Unbounded: handing out frames must never hold up the simulation.
                 jobs = ctx.Queue()
