@@ -68,6 +68,26 @@ def test_dance_after_lock_is_smooth_feasible_and_on_the_beat():
     assert {s.move for s in lc.segments} - {"calm"}  # real moves were chosen
 
 
+@pytest.mark.parametrize("period_s", [0.6, 0.43, 0.36, 0.3])
+def test_one_front_paw_up_at_a_time_across_segment_seams(period_s):
+    """The offline rule holds live too: never both front paws up, and both down for
+    min_ground_s between lifts. A seam's blend of two plans broke it (both paws up for up to
+    1 s in 40 s), and at 141 BPM the robot fell."""
+    min_gap = round(TargetConfig().min_ground_s * HZ)
+    for seed in range(4):
+        lc = LiveChoreographer(HZ, seed=seed)
+        for i in range(round(30.0 / 0.05)):
+            now = i * 0.05
+            lc.update(_state(now, now >= 2.0, period_s), now)
+        up = lc.rows[: lc.planned_until_step, :2] > 1e-3
+        assert up.any(axis=0).all()  # both paws dance
+        assert not np.any(up[:, 0] & up[:, 1])
+        either = np.concatenate([[False], up.any(axis=1), [False]])
+        edges = np.flatnonzero(np.diff(either.astype(np.int8)))
+        ground_steps = edges[2::2] - edges[1:-1:2]  # rows down between two lifts
+        assert ground_steps.min() >= min_gap
+
+
 def test_a_tempo_change_is_followed_bar_by_bar():
     lc = _run(lock_from_s=2.0, duration_s=24.0, period_of=lambda t: 0.5 if t < 12 else 0.4)
     tempos = [(s.start_s, s.tempo_bpm) for s in lc.segments if s.move != "calm"]

@@ -361,7 +361,7 @@ def test_tracker_keeps_the_true_tempo_through_syncopation_and_after_a_break() ->
     half tempo (64 BPM), until its snare backbeat doubles it (`analysis.backbeat_heard`)."""
     from quaddance.bench.live import live_songs
 
-    song = next(s for s in live_songs(SR_HZ) if s.name == "live_128_break_phase")
+    song = next(s for s in live_songs(SR_HZ, midi=False) if s.name == "live_128_break_phase")
     events, locks, tracker = _track(song.y)
     part2_s = song.music_starts_s[1]
     part1 = [bpm for t, locked, bpm in locks if locked and t < part2_s - 2.2]

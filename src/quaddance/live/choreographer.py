@@ -26,8 +26,10 @@ from quaddance.choreo.grid import MusicGrid
 from quaddance.targets import TargetConfig, feasible_body_targets, robot_targets
 
 #: Committed targets reach at least this far past the song's "now", s: the policy's preview
-#: (0.4 s) plus the audio-to-command latency, with margin.
-LOOKAHEAD_S = 1.0
+#: (0.4 s) plus the audio-to-command latency (45 ms), with 0.25 s for planning a bar (at most
+#: 14 ms measured). Every 0.1 s of it delays the first move after a lock by as much (1.0 s
+#: left 1.3-2.2 s between a lock and the first accent on a steady grid; 0.7 s, 1.0-1.7 s).
+LOOKAHEAD_S = 0.7
 #: Rate at which the human dance is rendered before it becomes robot targets (CHOREO_FPS).
 HUMAN_FPS = 60.0
 #: Beats each segment runs past its end, for lifts and gestures that land on its last beat.
@@ -35,8 +37,8 @@ TAIL_BEATS = 1.0
 #: Loudness history the choreographer reads, s: "loud" means loud for this song so far.
 ENERGY_HISTORY_S = 20.0
 ENERGY_FPS = 10.0
-#: Length of a calm (no lock) chunk, s.
-CALM_CHUNK_S = 0.5
+#: Length of a calm (no lock) chunk, s: short, so that a plan starts soon after a lock.
+CALM_CHUNK_S = 0.1
 BEATS_PER_BAR = 4
 
 
@@ -194,6 +196,7 @@ class LiveChoreographer:
             new[:n_fade, :4] = np.maximum(old[:, :4], new[:n_fade, :4])
             new[:n_fade, 4:] = (1 - w) * old[:, 4:] + w * new[:n_fade, 4:]
         self.rows = np.concatenate([self.rows[:start], new], axis=0)
+        _one_paw_at_a_time(self.rows, start, round(self.cfg.min_ground_s * self.hz))
 
 
 def _drop_cut_lifts(rows: np.ndarray, eps_m: float = 1e-3) -> None:
@@ -204,3 +207,37 @@ def _drop_cut_lifts(rows: np.ndarray, eps_m: float = 1e-3) -> None:
             down = np.flatnonzero(rows[:, k] <= eps_m)
             end = int(down[0]) if down.size else rows.shape[0]
             rows[:end, k] = 0.0
+
+
+def _lift_runs(paws: np.ndarray, eps_m: float) -> list[tuple[int, int, int]]:
+    """(start row, end row, paw) of each run of rows with a front paw above ``eps_m``,
+    sorted by start."""
+    runs = []
+    for k in (0, 1):
+        up = np.concatenate([[False], paws[:, k] > eps_m, [False]])
+        edges = np.flatnonzero(np.diff(up.astype(np.int8)))
+        runs += [(int(a), int(b), k) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+    return sorted(runs)
+
+
+def _one_paw_at_a_time(
+    rows: np.ndarray, first_free: int, min_ground_steps: int, eps_m: float = 1e-3
+) -> None:
+    """Keep, in place, the offline rule that one front paw is up at a time with both down for
+    ``min_ground_steps`` between lifts, across a seam: the higher-target blend of an old
+    plan's tail and a new plan can overlap a lift of one paw with a lift of the other, and
+    with both front paws up the robot falls (seen live at 141 BPM). Of two lifts too close,
+    the later one is dropped; rows before ``first_free`` are final and are never changed
+    (they obey the rule among themselves, so the later lift always starts after them)."""
+    first = max(0, first_free - 1)  # a lift under way at the seam is seen from its row before
+    lookback = first
+    while lookback > 0 and np.any(rows[lookback - 1, :2] > eps_m):
+        lookback -= 1  # from the start of any lift still under way at the seam
+    base = max(0, lookback - min_ground_steps)
+    busy_until = -(10**9)  # last row of the lifts kept so far
+    for a, b, k in _lift_runs(rows[base:, :2], eps_m):
+        a, b = a + base, b + base
+        if a - busy_until <= min_ground_steps and a >= first_free:
+            rows[a:b, k] = 0.0
+        else:
+            busy_until = max(busy_until, b - 1)
