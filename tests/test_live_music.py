@@ -372,3 +372,33 @@ def test_tracker_keeps_the_true_tempo_through_syncopation_and_after_a_break() ->
     assert len(late) >= 7  # 4 s of beats at 128 BPM, not at 64
     errors = _errors_s(events, song.beats_s, song.beats_s[-1] - 4.0, song.beats_s[-1])
     assert errors.max() <= HIT_WINDOW_S
+
+
+def test_bench_live_sets_are_what_their_names_say(tmp_path: Path) -> None:
+    """`bench live --sets`: the live-case sets hold their own songs (exact beats inside the
+    audio, downbeats every fourth beat, breaks where the music restarts), and an unknown set
+    is refused in one line."""
+    import shutil
+
+    from quaddance.bench.live import bench_live_tracker, live_case_songs
+    from quaddance.errors import QuaddanceError
+
+    if shutil.which("fluidsynth") is None:
+        pytest.skip("needs fluidsynth (scripts/setup.sh installs it)")
+    songs = live_case_songs(("heldout",), SR_HZ, cache_dir=tmp_path)
+    assert [s.set for s in songs] == ["heldout"] * 4
+    assert {s.name for s in songs} == {
+        "heldout_132_to_108",
+        "heldout_88_sync_break_104_swing",
+        "heldout_160_sections",
+        "heldout_midi_pair",
+    }
+    for s in songs:
+        assert s.beats_s[0] >= 0.0 and s.beats_s[-1] < len(s.y) / SR_HZ
+        assert np.all(np.diff(s.beats_s) > 0.25)  # <= 240 BPM, none doubled
+        assert np.isin(s.downbeats_s, s.beats_s).all()
+        for start in s.music_starts_s[1:]:  # silence before each restart, a beat at it
+            assert np.abs(s.y[round((start - 1.0) * SR_HZ) : round(start * SR_HZ)]).max() == 0
+            assert np.min(np.abs(s.beats_s - start)) < 1e-6
+    with pytest.raises(QuaddanceError, match="unknown live-bench set"):
+        bench_live_tracker(("heldout", "nope"), cache_dir=tmp_path)
