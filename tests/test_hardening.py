@@ -291,6 +291,42 @@ def _check_interrupted(returncode: int, stderr: str, sig: int, folder: Path) -> 
     assert not [p for p in folder.rglob("*") if ".tmp" in p.name], "temporary file left"
 
 
+_SIGNAL_IN_A_CTYPES_CALLBACK = """
+import ctypes, os, signal, sys, time
+from quaddance.cli import main
+import quaddance.cli as cli
+
+def work():
+    # qsort calls this comparator from C: the signal's handler runs inside a ctypes callback.
+    @ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p)
+    def compare(a, b):
+        os.kill(os.getpid(), SIGNUM)
+        for _ in range(1000):
+            pass
+        return 0
+    items = (ctypes.c_int * 2)(2, 1)
+    ctypes.CDLL(None).qsort(items, 2, ctypes.sizeof(ctypes.c_int), compare)
+    time.sleep(5.0)  # the work goes on: the interrupt must still stop it
+    print("not interrupted")
+
+cli.app = work
+main()
+"""
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_inside_a_ctypes_callback_still_stops_the_command_in_one_line(sig):
+    """Seen once in `choreograph`: Ctrl-C landed while numba loaded its LLVM cache (a ctypes
+    callback), where the KeyboardInterrupt could only be printed, with a traceback, and
+    dropped."""
+    code = _SIGNAL_IN_A_CTYPES_CALLBACK.replace("SIGNUM", str(int(sig)))
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    expected = EXIT_SIGTERM if sig == signal.SIGTERM else EXIT_SIGINT
+    assert proc.returncode == expected, proc.stderr
+    assert proc.stderr.strip() == "quaddance: interrupted"
+    assert "not interrupted" not in proc.stdout
+
+
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_interrupted_choreograph_leaves_a_complete_dance_or_none(tmp_path, demo_song, sig):
     from quaddance.dancefile import load_dance

@@ -1199,7 +1199,9 @@ def _stop_on_signals() -> dict[int, int]:
     its temporary file and no output is left half-written; returns {signal: exit status} of
     the first signal received (filled in by the handler). Later signals are ignored while
     the process cleans up, so a second Ctrl-C cannot cut the cleanup short."""
+    import os
     import signal
+    import threading
 
     received: dict[int, int] = {}
 
@@ -1209,6 +1211,23 @@ def _stop_on_signals() -> dict[int, int]:
         received[signum] = EXIT_SIGTERM if signum == signal.SIGTERM else EXIT_SIGINT
         raise KeyboardInterrupt(f"signal {signum}")
 
+    default_unraisable = sys.unraisablehook
+
+    def unraisable(info: Any) -> None:
+        # A signal that lands in a ctypes callback (numba's LLVM cache, while librosa loads)
+        # raises there, where ctypes can only print a traceback and drop the exception. Send
+        # the signal again, 50 ms later from another thread, once this hook has returned: the
+        # handler then raises in a frame of the main thread that can take it.
+        if isinstance(info.exc_value, KeyboardInterrupt) and received:
+            signum = next(iter(received))
+            received.clear()
+            resend = threading.Timer(0.05, os.kill, args=(os.getpid(), signum))
+            resend.daemon = True
+            resend.start()
+            return
+        default_unraisable(info)
+
+    sys.unraisablehook = unraisable
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, interrupt)
     return received
