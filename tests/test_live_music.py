@@ -298,6 +298,20 @@ def test_tracker_relocks_after_a_tempo_change() -> None:
     assert len(errors) >= 8 and errors.max() <= HIT_WINDOW_S
 
 
+def test_tracker_takes_the_new_phase_after_a_tempo_change_down() -> None:
+    """A change is heard seconds after it happens (132 -> 108 BPM at 14 s: about 18 s); the old
+    grid's phase, held across it, was by then half a beat off and stayed there, supported by
+    the off-beat eighths. After a tempo change the beats follow the score's new phase."""
+    from quaddance.music.synth import render_song
+
+    y, truth = render_song(132.0, 30.0, seed=7, sr=SR_HZ, tempo_change=(14.0, 108.0))
+    events, _, tracker = _track(y)
+    assert tracker.state.locked
+    assert tracker.state.tempo_bpm == pytest.approx(108.0, rel=0.02)
+    errors = _errors_s(events, truth.beats_s, 22.0, truth.beats_s[-1])
+    assert len(errors) >= 12 and errors.max() <= HIT_WINDOW_S
+
+
 def test_tracker_keeps_the_beat_when_loud_off_beat_hats_come_in() -> None:
     # The beat score follows the strongest pulse: bright hats on every off-beat, twice as loud
     # as the clicks, that come in once the tracker is locked pull it half a beat off (disco

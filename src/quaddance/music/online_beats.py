@@ -36,8 +36,8 @@ The tracker sees the audio block by block and never looks ahead. Per 11.6 ms fra
    reported beats (the score has switched to another, louder pulse: off-beat or swung hats
    that come in after the intro, a snare on the "and"), the reported beats stay on the old grid
    (an offset from the score's beats) for as long as that grid stays supported; when it loses
-   the lock, the reported beats follow the score again. A held grid follows its own onsets: each
-   supported beat moves the next ones onto its onset peak.
+   the lock, or the tempo changes, the reported beats follow the score again. A held grid
+   follows its own onsets: each supported beat moves the next ones onto its onset peak.
 6. Downbeats (4/4): the bar position whose beats carry the most kick/bass-band onsets over
    the last bars, with hysteresis.
 7. Energy: RMS mapped to [0, 1] by the 5th and 95th percentiles of the last 30 s (the offline
@@ -466,6 +466,7 @@ class OnlineBeatTracker:
         self._bar_evidence = np.zeros(BEATS_PER_BAR)
         self._bar_phase = 0  # index (mod 4) of the beats that are downbeats
         self._beat_offset = 0.0  # reported beats follow the score's beats by this, periods
+        self._phase_free = False  # the next beat is the score's, not held (a new tempo)
         self._locked = False
         self._doubled = False  # the backbeat test doubled the filter's tempo (item 2)
         self._misses = 0
@@ -608,9 +609,12 @@ class OnlineBeatTracker:
             self._m0 = 1  # predict the first beat now
         elif abs(np.log(self._period / old_period)) > np.log(REBUILD_TEMPO_RATIO):
             self._rebuild_cumscore()
-            # A new period: the offset found on the old one no longer applies (while locked,
-            # the hold below keeps the reported grid continuous across the change).
+            # A new period: the offset found on the old one no longer applies, nor does the
+            # old grid's phase: the change is heard seconds after it happened, and by then the
+            # old grid has drifted off the music (held across the change, it kept an off-beat
+            # phase that off-beat onsets then supported; funk_104_sync F 0.23 -> 0.41).
             self._beat_offset = 0.0
+            self._phase_free = True
 
     def _best_near(self, log_bpm: float) -> int:
         """The filter's best tempo within `STEADY_TEMPO_RATIO` of ``log_bpm``."""
@@ -692,6 +696,9 @@ class OnlineBeatTracker:
         docstring): move the offset by the jump, so the reported beat lands one period after
         the previous one."""
         prev_s = self._scheduled[-1] if self._scheduled else self._last_beat_s
+        if self._phase_free:  # the first beat after a tempo change: the score's own
+            self._phase_free = False
+            return
         if not (self._locked and np.isfinite(prev_s)):
             return
         jump = (beat_s - prev_s) / (self._period * FRAME_S) - 1.0  # beats off the grid
