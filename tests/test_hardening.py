@@ -304,8 +304,21 @@ def work():
         for _ in range(1000):
             pass
         return 0
-    items = (ctypes.c_int * 2)(2, 1)
-    ctypes.CDLL(None).qsort(items, 2, ctypes.sizeof(ctypes.c_int), compare)
+    class Number:  # ctypes converts it by calling from_param, in Python
+        @classmethod
+        def from_param(cls, value):
+            os.kill(os.getpid(), SIGNUM)
+            for _ in range(1000):
+                pass
+            return ctypes.c_int(value)
+
+    libc = ctypes.CDLL(None)
+    if MODE == "callback":
+        items = (ctypes.c_int * 2)(2, 1)
+        libc.qsort(items, 2, ctypes.sizeof(ctypes.c_int), compare)
+    else:  # ctypes wraps the KeyboardInterrupt in an ArgumentError
+        libc.abs.argtypes = [Number]
+        libc.abs(-3)
     time.sleep(5.0)  # the work goes on: the interrupt must still stop it
     print("not interrupted")
 
@@ -314,12 +327,15 @@ main()
 """
 
 
+@pytest.mark.parametrize("mode", ["callback", "argument"])
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
-def test_a_signal_inside_a_ctypes_callback_still_stops_the_command_in_one_line(sig):
-    """Seen once in `choreograph`: Ctrl-C landed while numba loaded its LLVM cache (a ctypes
-    callback), where the KeyboardInterrupt could only be printed, with a traceback, and
-    dropped."""
+def test_a_signal_inside_a_ctypes_callback_still_stops_the_command_in_one_line(sig, mode):
+    """Seen in `choreograph` and `dance`: Ctrl-C landed while numba loaded its LLVM cache (a
+    ctypes callback), where the KeyboardInterrupt could only be printed, with a traceback,
+    and dropped; or while PyOpenGL converted a ctypes argument, where it became an
+    ArgumentError with a traceback."""
     code = _SIGNAL_IN_A_CTYPES_CALLBACK.replace("SIGNUM", str(int(sig)))
+    code = code.replace("MODE", repr(mode))
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     expected = EXIT_SIGTERM if sig == signal.SIGTERM else EXIT_SIGINT
     assert proc.returncode == expected, proc.stderr

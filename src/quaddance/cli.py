@@ -1248,11 +1248,15 @@ def main() -> None:
             # Python restores the default action, which would end it with no message).
             for signum in (signal.SIGINT, signal.SIGTERM):
                 signal.signal(signum, signal.SIG_IGN)
-    except QuaddanceError as err:
-        print(one_line_error(err), file=sys.stderr)
-        sys.exit(2)
     except KeyboardInterrupt:
         _interrupted(received)
+    except Exception as err:
+        if received:  # the signal surfaced inside a library as another error (ctypes wraps
+            _interrupted(received)  # it in an ArgumentError while converting an argument)
+        if isinstance(err, QuaddanceError):
+            print(one_line_error(err), file=sys.stderr)
+            sys.exit(2)
+        raise
     except SystemExit:
         # typer turns KeyboardInterrupt into a silent exit 130; say why we stopped.
         if received:
