@@ -4,6 +4,7 @@ tracker (lock, tempo, re-lock after a tempo change, silence, downbeats, latency)
 from __future__ import annotations
 
 import importlib.abc
+import subprocess
 import sys
 import threading
 import time
@@ -416,3 +417,10 @@ def test_bench_live_sets_are_what_their_names_say(tmp_path: Path) -> None:
             assert np.min(np.abs(s.beats_s - start)) < 1e-6
     with pytest.raises(QuaddanceError, match="unknown live-bench set"):
         bench_live_tracker(("heldout", "nope"), cache_dir=tmp_path)
+    out = tmp_path / "live.json"
+    cmd = [sys.executable, "-m", "quaddance.cli", "bench", "live", "--tracker-only"]
+    proc = subprocess.run(
+        [*cmd, "--sets", "heldout,nope", "-o", str(out)], capture_output=True, text=True
+    )
+    assert proc.returncode == 2 and "unknown live-bench set(s) ['nope']" in proc.stderr
+    assert not out.exists()
