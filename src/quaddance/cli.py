@@ -1199,7 +1199,6 @@ def _stop_on_signals() -> dict[int, int]:
     its temporary file and no output is left half-written; returns {signal: exit status} of
     the first signal received (filled in by the handler). Later signals are ignored while
     the process cleans up, so a second Ctrl-C cannot cut the cleanup short."""
-    import os
     import signal
     import threading
 
