@@ -335,6 +335,71 @@ def test_frames_from_several_workers_come_in_order(tmp_path: Path, scene_model) 
     assert np.abs(frames[1][0] - frames[1][15]).mean() > 0.5
 
 
+def test_a_slow_encoder_gets_every_frame_as_drawn(tmp_path: Path, scene_model, monkeypatch):
+    """The workers draw into a ring of frame slots that the encoder writes out: when the
+    encoder is slower than the workers, they wait for it and never draw over a frame it has
+    not written yet. 100 frames over 2 workers go round each worker's slots 5 times."""
+    import time
+
+    import imageio_ffmpeg
+
+    from quaddance.play import video
+
+    qpos = _dancing_qpos(scene_model, 4.0)
+    frame = video._FrameSlots.frame
+
+    def slow_frame(self, worker: int, slot: int) -> memoryview:
+        time.sleep(0.02)  # the workers run ahead meanwhile
+        return frame(self, worker, slot)
+
+    videos = []
+    for name in ("fast", "slow"):
+        if name == "slow":
+            monkeypatch.setattr(video._FrameSlots, "frame", slow_frame)
+        out = tmp_path / f"{name}.mp4"
+        with video.VideoRenderer(scene_model, 160, 120, workers=2) as renderer:
+            renderer.render(qpos, SIM_FPS, out, progress=False)
+        reader = imageio_ffmpeg.read_frames(str(out))
+        next(reader)
+        videos.append(np.stack([np.frombuffer(f, np.uint8).astype(int) for f in reader]))
+    n_video = round(4.0 * video.VIDEO_FPS)
+    assert n_video > 2 * 2 * video._SLOTS
+    assert videos[0].shape == videos[1].shape == (n_video, 160 * 120 * 3)
+    assert np.abs(videos[0] - videos[1]).max() <= 2
+
+
+def test_frame_buffers_fall_back_to_disk_and_a_full_disk_is_one_clear_error(
+    tmp_path: Path, monkeypatch
+) -> None:
+    import errno
+    import os
+
+    from quaddance.errors import QuaddanceError
+    from quaddance.play import video
+
+    slots = video._FrameSlots(tmp_path, 2, 64, 48)
+    try:
+        assert slots.path.is_file() and slots.path.stat().st_size == 2 * video._SLOTS * 64 * 48 * 3
+        assert len(slots.frame(1, video._SLOTS - 1)) == 64 * 48 * 3
+    finally:
+        slots.close()
+    assert not slots.path.exists()
+
+    full = os.statvfs_result((4096, 4096, 100, 0, 0, 100, 0, 0, 0, 255))
+    monkeypatch.setattr(os, "statvfs", lambda path: full)  # /dev/shm without room
+    slots = video._FrameSlots(tmp_path, 2, 64, 48)
+    assert slots.path.parent == tmp_path
+    slots.close()
+
+    def no_space(fd: int, offset: int, size: int) -> None:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(os, "posix_fallocate", no_space)
+    with pytest.raises(QuaddanceError, match=r"no room .* frame buffers .*No space left"):
+        video._FrameSlots(tmp_path, 2, 64, 48)
+    assert not list(tmp_path.iterdir())  # nothing left behind
+
+
 def test_video_streamed_during_the_simulation_equals_the_one_made_afterwards(
     tmp_path: Path, scene_model
 ) -> None:
