@@ -399,6 +399,13 @@ def test_frame_buffers_fall_back_to_disk_and_a_full_disk_is_one_clear_error(
         video._FrameSlots(tmp_path, 2, 64, 48)
     assert not list(tmp_path.iterdir())  # nothing left behind
 
+    # Without posix_fallocate (macOS), zeros are written instead.
+    monkeypatch.delattr(os, "posix_fallocate")
+    slots = video._FrameSlots(tmp_path, 3, 640, 480)  # more than one 1 MB chunk of zeros
+    assert slots.path.stat().st_size == 3 * video._SLOTS * 640 * 480 * 3
+    assert len(slots.frame(2, 0)) == 640 * 480 * 3
+    slots.close()
+
 
 def test_video_streamed_during_the_simulation_equals_the_one_made_afterwards(
     tmp_path: Path, scene_model

@@ -26,6 +26,7 @@ at this size and renders several times faster on llvmpipe.
 from __future__ import annotations
 
 import contextlib
+import errno
 import multiprocessing as mp
 import os
 import queue as queue_module
@@ -358,29 +359,46 @@ _FRAMES_AHEAD = 8
 _SLOTS = _FRAMES_AHEAD + 2
 
 
+def _reserve(fd: int, size: int) -> None:
+    """Give the file ``size`` bytes of storage now: posix_fallocate, or zeros written where
+    the system or its file system has none (macOS, some network file systems)."""
+    fallocate = getattr(os, "posix_fallocate", None)
+    if fallocate is not None:
+        try:
+            fallocate(fd, 0, size)
+            return
+        except OSError as err:
+            if err.errno not in (errno.EOPNOTSUPP, errno.EINVAL, errno.ENOSYS):
+                raise
+    zeros = bytes(min(size, 1 << 20))
+    done = 0
+    while done < size:
+        done += os.write(fd, zeros[: size - done])
+
+
 class _FrameSlots:
     """The workers' frames, in a file that the caller and the workers map: a frame goes to
     the encoder without crossing a pipe (measured with 640x480 frames: 0.9 ms CPU per frame
     for the two processes together, against 6.3 ms through a pickling queue; 1.9 s of a 12 s
     clip's 25 s CPU). In /dev/shm (memory) when it has room, else in ``fallback_dir``; the
-    space is reserved at once (posix_fallocate), so a full disk is an error here, never a
-    SIGBUS mid-video."""
+    space is reserved at once (`_reserve`), so a full disk is an error here, never a SIGBUS
+    mid-video."""
 
     def __init__(self, fallback_dir: Path, n_workers: int, width: int, height: int) -> None:
         self.shape = (n_workers, _SLOTS, height, width, 3)
         size = int(np.prod(self.shape))
         shm = Path("/dev/shm")
-        try:
-            st = os.statvfs(shm)
-            in_memory = shm.is_dir() and st.f_bavail * st.f_frsize > 2 * size
-        except OSError:
-            in_memory = False
+        in_memory = False
+        if shm.is_dir() and hasattr(os, "statvfs"):
+            with contextlib.suppress(OSError):
+                st = os.statvfs(shm)
+                in_memory = st.f_bavail * st.f_frsize > 2 * size
         fd, name = tempfile.mkstemp(
             prefix="quaddance-frames-", dir=shm if in_memory else fallback_dir
         )
         self.path = Path(name)
         try:
-            os.posix_fallocate(fd, 0, size)
+            _reserve(fd, size)
             self._map = np.memmap(self.path, dtype=np.uint8, mode="r+", shape=self.shape)
         except OSError as err:
             self.close()
