@@ -378,9 +378,9 @@ def _reserve(fd: int, size: int) -> None:
 
 class _FrameSlots:
     """The workers' frames, in a file that the caller and the workers map: a frame goes to
-    the encoder without crossing a pipe (measured with 640x480 frames: 0.9 ms CPU per frame
-    for the two processes together, against 6.3 ms through a pickling queue; 1.9 s of a 12 s
-    clip's 25 s CPU). In /dev/shm (memory) when it has room, else in ``fallback_dir``; the
+    the encoder without crossing a pipe (measured in isolation with 640x480 frames: 0.9 ms
+    CPU per frame for the two processes together, against 6.3 ms through a pickling queue; a
+    12 s clip has 300 frames). In /dev/shm (memory) when it has room, else in ``fallback_dir``; the
     space is reserved at once (`_reserve`), so a full disk is an error here, never a SIGBUS
     mid-video."""
 
