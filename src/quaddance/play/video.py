@@ -385,7 +385,7 @@ class _FrameSlots:
     mid-video."""
 
     def __init__(self, fallback_dir: Path, n_workers: int, width: int, height: int) -> None:
-        self.shape = (n_workers, _SLOTS, height, width, 3)
+        self.shape = self._shape(n_workers, width, height)
         size = int(np.prod(self.shape))
         shm = Path("/dev/shm")
         in_memory = False
@@ -410,9 +410,13 @@ class _FrameSlots:
             os.close(fd)
 
     @staticmethod
-    def attach(path: Path, worker: int, n_workers: int, width: int, height: int) -> np.ndarray:
+    def _shape(n_workers: int, width: int, height: int) -> tuple[int, ...]:
+        return (n_workers, _SLOTS, height, width, 3)
+
+    @classmethod
+    def attach(cls, path: Path, worker: int, n_workers: int, width: int, height: int) -> np.ndarray:
         """A worker's (``_SLOTS``, height, width, 3) slots in the file at ``path``."""
-        shape = (n_workers, _SLOTS, height, width, 3)
+        shape = cls._shape(n_workers, width, height)
         return np.memmap(path, dtype=np.uint8, mode="r+", shape=shape)[worker]
 
     def frame(self, worker: int, slot: int) -> memoryview:
