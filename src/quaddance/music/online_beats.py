@@ -695,10 +695,10 @@ class OnlineBeatTracker:
         (reported at ``beat_s`` with the current offset) jumps off it (item 5 of the module's
         docstring): move the offset by the jump, so the reported beat lands one period after
         the previous one."""
-        prev_s = self._scheduled[-1] if self._scheduled else self._last_beat_s
         if self._phase_free:  # the first beat after a tempo change: the score's own
             self._phase_free = False
             return
+        prev_s = self._scheduled[-1] if self._scheduled else self._last_beat_s
         if not (self._locked and np.isfinite(prev_s)):
             return
         jump = (beat_s - prev_s) / (self._period * FRAME_S) - 1.0  # beats off the grid
