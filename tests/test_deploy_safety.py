@@ -161,6 +161,39 @@ def test_late_inference_holds_the_last_command():
     assert (np.abs(log["q_target"][moving] - log["q_target"][moving - 1]).max(1) > 0).mean() > 0.9
 
 
+def test_done_keeps_the_policy_balancing_at_its_rest_targets_then_damps():
+    """After the dance the policy itself stands the robot (feet down; a whole-body policy
+    crouches) for `done_stand_s`, then damping: no joint-space move to a fixed pose, which
+    drags the planted feet and tilted the trunk."""
+    from quaddance.pipeline import target_bank
+    from quaddance.targets import BODY_LIMITS_FOUR_FEET
+
+    policy = OnnxPolicy.load(shipped_policy_path())
+    cfg = SafetyCfg(
+        passive_s=0.1, stand_s=2.0, gain_ramp_s=1.0, ready_settle_s=0.1, done_stand_s=0.8
+    )
+    targets = target_bank(1, 2.0, seed=1)[0]
+    runner = Runner(
+        StandingRobot(), policy, targets, DeployOptions(seconds=1.0, auto_start=True, safety=cfg)
+    )
+    log = runner.run().log
+    done = np.flatnonzero(log["state"] == STATES.index("done"))
+    standing, damping = done[log["kp"][done] > 0], done[log["kp"][done] == 0]
+    dt = 1.0 / policy.task.policy_hz
+    # Durations on the wall clock: a late tick may move a switch by a tick or two.
+    assert len(standing) * dt == pytest.approx(cfg.done_stand_s, abs=3 * dt)
+    assert len(damping) * dt == pytest.approx(cfg.done_damp_s, abs=3 * dt)
+    assert standing.max() < damping.min()
+    assert np.isfinite(log["action"][standing]).all()  # the policy, every tick
+    fade = round(cfg.done_fade_s / dt)
+    rest = standing[fade + 1 :]
+    np.testing.assert_array_equal(log["targets_m"][rest], 0.0)
+    assert policy.task.whole_body  # the shipped policy: it crouches to its lowest trunk
+    crouch = BODY_LIMITS_FOUR_FEET.height_offset_m[0]
+    np.testing.assert_allclose(log["body_targets"][rest][:, 0], crouch, atol=1e-6)
+    np.testing.assert_array_equal(log["body_targets"][rest][:, 1:], 0.0)
+
+
 @pytest.mark.parametrize("bad", ["joint", "inject"])
 def test_deploy_job_refuses_bad_settings(tmp_path, bad):
     from quaddance.deploy.job import DeployJob, parse_inject, run_deploy

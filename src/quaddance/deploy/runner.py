@@ -40,6 +40,7 @@ from quaddance.sim.kinematics import foot_pos_b
 from quaddance.sim.observations import ActorObservation, Measurement
 from quaddance.sim.state import yaw_from_quat
 from quaddance.sim.task import joint_targets
+from quaddance.targets import BODY_LIMITS_FOUR_FEET
 
 #: Real-time priority of the runner; the simulated robot's (a separate machine's motor
 #: boards, in reality) is above it.
@@ -88,6 +89,11 @@ class DanceController:
         self.step = 0  # dance step (policy ticks since dance time 0)
         self.heading_zero_rad = 0.0  # IMU yaw at dance time 0 (`reset`)
         self._fade: tuple[torch.Tensor, int, int] | None = None
+        #: What `fade_out` ends at: feet down; a whole-body policy also crouches (the lowest
+        #: trunk height it dances), so damping after the dance lets it down from lower.
+        self.rest_row = torch.zeros(1, 8)
+        if cfg.whole_body:
+            self.rest_row[0, 4] = BODY_LIMITS_FOUR_FEET.height_offset_m[0]
         self.last_action = torch.zeros(1, go1.NUM_JOINTS)
         self._ids = torch.zeros(1, dtype=torch.long)
 
@@ -110,12 +116,13 @@ class DanceController:
         k = self.step + ahead_steps
         if self._fade is not None:
             row, first, n = self._fade
-            return row * max(0.0, 1.0 - (k - first) / n)
+            u = min(1.0, (k - first) / n)
+            return row + u * (self.rest_row - row)
         return self.rows[min(k, self.n_steps - 1)][None]
 
     def targets_at(self, ahead_steps: int) -> torch.Tensor:
         """(1, 4) paw targets ``ahead_steps`` ticks from the current step (held at the end;
-        faded to 0 after `fade_out`)."""
+        faded to `rest_row` after `fade_out`)."""
         return self._row(ahead_steps)[:, :4]
 
     def body_targets_at(self, ahead_steps: int) -> torch.Tensor:
@@ -123,8 +130,8 @@ class DanceController:
         return self._row(ahead_steps)[:, 4:]
 
     def fade_out(self, steps: int) -> None:
-        """From the current step on, targets go linearly from their value now to 0 (all
-        feet down, trunk at the standing pose) over ``steps`` ticks."""
+        """From the current step on, targets go linearly from their value now to `rest_row`
+        over ``steps`` ticks, and stay there."""
         self._fade = (self._row(0).clone(), self.step, max(1, steps))
 
     def measurement(self, reading: Reading) -> Measurement:
@@ -368,7 +375,6 @@ class Runner:
         self.last_cmd = sf.damping_command(first.joint_pos_rad)
         self.dance_start: float | None = None  # runner clock at dance time 0
         self.dance_end_s: float | None = None  # dance time when the dance stopped
-        self.done_from: np.ndarray | None = None  # targets when `done` began
         self.finished = False
         last_reading, last_gravity = first, np.array([0.0, 0.0, -1.0])
         overruns, last_seq = 0, -1
@@ -441,17 +447,12 @@ class Runner:
             rows, self.dance_start, t0, self.dance_end_s, self.injected, overruns, self.audio
         )
 
-    def _done_standing_s(self) -> float:
-        """How long `done` keeps the robot standing (settle + stand) before damping."""
-        cfg = self.opt.safety
-        return (cfg.done_settle_s if self.dance_start is not None else 0.0) + cfg.done_stand_s
-
     def _posture_matters(self, now: float) -> bool:
         """Roll, pitch and trunk height are checked from `stand` until `done` damps."""
         sf = self.safety
         if sf.state in ("passive", "damp"):
             return False
-        return not (sf.state == "done" and now - sf.entered_s >= self._done_standing_s())
+        return not (sf.state == "done" and now - sf.entered_s >= self.opt.safety.done_stand_s)
 
     # --- one method per state: each sets tick.cmd (and may change the state) ----------------
     def _passive(self, tick: _Tick) -> None:
@@ -484,7 +485,6 @@ class Runner:
         else:
             pressed = _enter_pressed()
             if pressed is None:
-                self.done_from = sf.last_target
                 sf.go("done", "stdin closed: nobody to press Enter", tick.now)
                 return
             start = pressed
@@ -543,21 +543,18 @@ class Runner:
             tick.cmd, tick.tau_est = sf.guard(target.astype(np.float64), sf.kp, tick.reading)
 
     def _done(self, tick: _Tick) -> None:
-        """Settle (the policy, targets fading to feet down), PD to the stand, then damping."""
+        """Stand (the policy balancing on targets faded to its rest row; without a dance the
+        nominal pose held), then damping."""
         sf, cfg = self.safety, self.opt.safety
         into = tick.now - sf.entered_s
-        settle_s = cfg.done_settle_s if self.dance_start is not None else 0.0
-        if into < settle_s:
-            self._policy_step(tick, round((tick.now - self.dance_start) / self.tick_s))
-            self.done_from = sf.last_target
-        elif into < settle_s + cfg.done_stand_s:
-            start = self.done_from if self.done_from is not None else sf.nominal_rad
-            u = (into - settle_s) / cfg.done_stand_s
-            target = start + (u * u * (3 - 2 * u)) * (sf.nominal_rad - start)
-            tick.cmd, tick.tau_est = sf.guard(target, sf.kp, tick.reading)
+        if into < cfg.done_stand_s:
+            if self.dance_start is not None:
+                self._policy_step(tick, round((tick.now - self.dance_start) / self.tick_s))
+            else:
+                tick.cmd, tick.tau_est = sf.guard(sf.nominal_rad, sf.kp, tick.reading)
         else:  # lie down under damping
             tick.cmd = sf.damping_command(tick.reading.joint_pos_rad)
-            self.finished = into >= settle_s + cfg.done_stand_s + cfg.done_damp_s
+            self.finished = into >= cfg.done_stand_s + cfg.done_damp_s
 
     def _damp(self, tick: _Tick) -> None:
         sf = self.safety
@@ -611,7 +608,7 @@ class Runner:
             end = np.inf
             done = [e for e in self.safety.events if e.to == "done"]
             if self.safety.state == "done" and done:
-                end = done[-1].clock_s + self._done_standing_s()
+                end = done[-1].clock_s + self.opt.safety.done_stand_s
             fallen &= (truth["mono_s"] >= start) & (truth["mono_s"] < end)
             falls = int(np.count_nonzero(np.diff(fallen.astype(int), prepend=0) == 1))
         else:
