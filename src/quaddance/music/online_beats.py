@@ -10,8 +10,9 @@ The tracker sees the audio block by block and never looks ahead. Per 11.6 ms fra
    the tempo envelope (the same "lag whose multiples line up" score and log-normal prior as the
    offline analyser, which prefers the true tempo to half tempo in the dance range), followed
    by an online Viterbi filter over a log-tempo grid: tempo drifts cheaply and jumps at a fixed
-   cost; a recent-weighted window lets a tempo change win within a few seconds, and the beat
-   score is then recomputed on the new period so the beats move onto the new grid at once.
+   cost; a recent-weighted window lets a tempo change win within a few seconds (a shorter
+   one once the beats start missing their onsets), and the beat score is then recomputed on
+   the new period so the beats move onto the new grid at once.
    Before the lock, a tempo heard at half a snare backbeat doubles (the offline analyser's
    backbeat test, on the recent music folded over the beat period); once locked, the
    metrical level is held: a filter tempo of double, half, 3/2 or 2/3 of the locked one
@@ -104,6 +105,13 @@ TEMPO_DRIFT_STEPS = 2.0
 TEMPO_JUMP_COST = 3.0
 """Cost of a tempo jump, in units of one hop of the clearest evidence (offline analyser's)."""
 
+FAST_MISSES = 2
+FAST_OF_BEATS = 3
+FAST_WINDOW_S = 3.0
+"""While locked, when ``FAST_MISSES`` of the last ``FAST_OF_BEATS`` beats found no onset (the
+music has left the grid: a tempo change), the tempo is estimated from the last
+``FAST_WINDOW_S`` only, where the new tempo dominates: a change is followed 1.8-3.3 s after it
+instead of 3.6-3.9 s (5 synthetic songs, 95-140 BPM, changes of 20-25 %)."""
 REBUILD_TEMPO_RATIO = 1.05
 """A tempo change larger than this ratio recomputes the cumulative beat score ..."""
 REBUILD_S = 4.0
@@ -559,13 +567,17 @@ class OnlineBeatTracker:
         onset = np.asarray(self._onset_t)
         if len(onset) < MIN_TEMPO_WINDOW_S * self._fps:
             return
+        span = self._hist_len  # frames the window rises over
+        if self._locked and self._support[-FAST_OF_BEATS:].count(False) >= FAST_MISSES:
+            span = round(FAST_WINDOW_S * self._fps)  # the grid is failing: recent music only
+            onset = onset[-span:]
         periods = 60.0 * self._fps / np.exp(self._log_bpm)
         max_lag = min(len(onset) - 1, int(TEMPO_HARMONICS * periods.max()) + 2)
         # Recent music weighs more (a rising half-Hann window over TEMPO_WINDOW_S, by the age
         # of each frame, so that a short history at the start is weighed almost evenly), so
         # that a tempo change shows within a few seconds; dividing by the window's own
         # autocorrelation removes its pull towards short lags.
-        window = np.hanning(2 * self._hist_len + 1)[1 : self._hist_len + 1][-len(onset) :]
+        window = np.hanning(2 * span + 1)[1 : span + 1][-len(onset) :]
         ac = _autocorrelation((onset - onset.mean()) * window, max_lag)
         ac /= np.maximum(_autocorrelation(window, max_lag, demean=False), 0.05)
         sal = np.zeros(len(periods))
