@@ -60,8 +60,8 @@ class SafetyCfg:
     #: After the dance the policy keeps balancing while its targets fade over `done_fade_s`
     #: to feet down (a whole-body policy also crouches: `DanceController.rest_row`), and
     #: stands so for `done_stand_s` in all (without a dance: the nominal pose is held). A PD
-    #: move to the nominal joints instead tilted the trunk 0.15-0.3 rad, and tipped it once in
-    #: 16 runs under +50 ms lag: the feet stay where the dance left them, not where the
+    #: move to the nominal joints instead tilted the trunk 0.14-0.33 rad and tipped it over in
+    #: 1 of 24 runs under +50 ms lag: the feet stay where the dance left them, not where the
     #: nominal joints would put them.
     done_fade_s: float = 0.4
     done_stand_s: float = 2.0
