@@ -180,10 +180,12 @@ def test_done_keeps_the_policy_balancing_at_its_rest_targets_then_damps():
     done = np.flatnonzero(log["state"] == STATES.index("done"))
     standing, damping = done[log["kp"][done] > 0], done[log["kp"][done] == 0]
     dt = 1.0 / policy.task.policy_hz
-    # Durations on the wall clock: a late tick may move a switch by a tick or two.
-    assert len(standing) * dt == pytest.approx(cfg.done_stand_s, abs=3 * dt)
-    assert len(damping) * dt == pytest.approx(cfg.done_damp_s, abs=3 * dt)
     assert standing.max() < damping.min()
+    # Durations on the runner's clock (ticks a stalled machine skipped do not count); a late
+    # tick moves a switch by up to a tick.
+    wall = log["wall_s"]
+    assert wall[damping.min()] - wall[standing.min()] == pytest.approx(cfg.done_stand_s, abs=2 * dt)
+    assert wall[damping.max()] - wall[damping.min()] == pytest.approx(cfg.done_damp_s, abs=2 * dt)
     assert np.isfinite(log["action"][standing]).all()  # the policy, every tick
     fade = round(cfg.done_fade_s / dt)
     rest = standing[fade + 1 :]
