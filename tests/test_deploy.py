@@ -269,7 +269,7 @@ def test_sim_deploy_of_a_song_dances_through_lag_with_a_soft_start_in_torque_lim
     # `done` stands on the policy: the trunk stays near level until damping lets it down
     # (a PD move to the nominal joints tilted it 0.14-0.9 rad under this lag; now <= 0.16).
     standing = (log["state"] == STATES.index("done")) & (log["kp"] > 0)
-    assert standing.sum() >= 90 and log["tilt_true_rad"][standing].max() < 0.25
+    assert standing.sum() >= 50 and log["tilt_true_rad"][standing].max() < 0.25
     # The lag reached the runner (states 50 ms older after 15 s) and the dance went on.
     dancing = log["state"] == STATES.index("dance")
     age_before = np.median(log["age_s"][dancing & (log["t_s"] < 14.9)])
