@@ -91,9 +91,9 @@ class DanceController:
         self._fade: tuple[torch.Tensor, int, int] | None = None
         #: What `fade_out` ends at: feet down; a whole-body policy also crouches (the lowest
         #: trunk height it dances), so damping after the dance lets it down from lower.
-        self.rest_row = torch.zeros(1, 8)
+        self.rest_row = torch.zeros(1, self.rows.shape[1])  # same columns as `rows`
         if cfg.whole_body:
-            self.rest_row[0, 4] = BODY_LIMITS_FOUR_FEET.height_offset_m[0]
+            self.rest_row[0, paws.shape[1]] = BODY_LIMITS_FOUR_FEET.height_offset_m[0]
         self.last_action = torch.zeros(1, go1.NUM_JOINTS)
         self._ids = torch.zeros(1, dtype=torch.long)
 
