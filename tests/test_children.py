@@ -51,3 +51,23 @@ def test_calls_to_a_dead_helper_are_helper_errors():
         helper.call(statistics.mean, data=[1])
     helper.close()
     helper.close()  # twice is harmless
+
+
+def _sleep(seconds: float) -> None:
+    time.sleep(seconds)
+
+
+def test_ready_says_whether_an_answer_is_waiting():
+    helper = HelperProcess()
+    try:
+        assert not helper.ready()  # nothing asked
+        helper.submit(_sleep, seconds=1.5)
+        assert not helper.ready()  # asked, still sleeping there
+        end = time.monotonic() + 30.0
+        while not helper.ready() and time.monotonic() < end:
+            time.sleep(0.05)
+        assert helper.ready()
+        assert helper.result() is None
+        assert not helper.ready()  # read
+    finally:
+        helper.close()

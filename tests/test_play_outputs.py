@@ -339,6 +339,7 @@ def test_a_slow_encoder_gets_every_frame_as_drawn(tmp_path: Path, scene_model, m
     """The workers draw into a ring of frame slots that the encoder writes out: when the
     encoder is slower than the workers, they wait for it and never draw over a frame it has
     not written yet. 100 frames over 2 workers go round each worker's slots 5 times."""
+    import os
     import time
 
     import imageio_ffmpeg
@@ -358,6 +359,12 @@ def test_a_slow_encoder_gets_every_frame_as_drawn(tmp_path: Path, scene_model, m
             monkeypatch.setattr(video._FrameSlots, "frame", slow_frame)
         out = tmp_path / f"{name}.mp4"
         with video.VideoRenderer(scene_model, 160, 120, workers=2) as renderer:
+            if name == "fast":
+                # Workers yield the cores to the caller (its simulation feeds them).
+                own = os.getpriority(os.PRIO_PROCESS, 0)
+                for proc in renderer._procs:
+                    nice = os.getpriority(os.PRIO_PROCESS, proc.pid)
+                    assert nice == min(19, own + video.WORKER_NICE) > own
             renderer.render(qpos, SIM_FPS, out, progress=False)
         reader = imageio_ffmpeg.read_frames(str(out))
         next(reader)
@@ -524,3 +531,29 @@ def test_learning_curve_plot_from_a_curve_csv(tmp_path) -> None:
     empty.write_text("iteration,env_steps\n")
     with pytest.raises(QuaddanceError, match="no rows"):
         plot_learning_curve(tmp_path / "x.png", empty)
+
+
+def test_finite_planes_bound_an_infinite_floor_for_drawing_only() -> None:
+    import mujoco
+
+    from quaddance.play.video import finite_planes
+
+    xml = """<mujoco><asset>
+      <texture name="t" type="2d" builtin="checker" width="8" height="8"/>
+      <material name="floor" texture="t" texrepeat="4 4"/>
+      <material name="shared" texture="t" texrepeat="2 2"/></asset>
+      <worldbody>
+        <geom name="inf" type="plane" size="0 0 0.05" material="floor"/>
+        <geom name="fin" type="plane" size="2 3 0.1" material="floor"/>
+        <geom name="inf2" type="plane" size="0 0 0.05" material="shared"/>
+        <geom name="box" type="box" size="1 1 1" material="shared"/>
+      </worldbody></mujoco>"""
+    model = mujoco.MjModel.from_xml_string(xml)
+    assert finite_planes(model, 30.0, 0.5) == 2
+    np.testing.assert_allclose(model.geom("inf").size, [30.0, 30.0, 0.5])
+    np.testing.assert_allclose(model.geom("inf2").size, [30.0, 30.0, 0.5])
+    np.testing.assert_allclose(model.geom("fin").size, [2.0, 3.0, 0.1])  # already finite
+    # The floor's checker keeps its size per metre; a material that a box shares keeps its
+    # mapping, or the box would change its look.
+    assert model.mat_texuniform[model.material("floor").id] == 1
+    assert model.mat_texuniform[model.material("shared").id] == 0

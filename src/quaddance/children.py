@@ -78,6 +78,16 @@ class HelperProcess:
             raise HelperError(value)
         return value
 
+    def ready(self) -> bool:
+        """Whether the oldest unread call's answer has arrived (`result` will not wait); also
+        True where the helper has died, since `result` then raises at once."""
+        if self._waiting == 0:
+            return False
+        try:
+            return self._conn.poll(0)
+        except (OSError, ValueError):
+            return True
+
     def call(self, fn: Callable[..., Any], **kwargs: Any) -> Any:
         self.submit(fn, **kwargs)
         return self.result()

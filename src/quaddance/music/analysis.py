@@ -223,31 +223,25 @@ def _local_normalise(x: np.ndarray, fps: float, cfg: AnalysisConfig) -> np.ndarr
     return x / np.maximum(level, 0.1 * float(np.mean(level)) + 1e-9)
 
 
-def rms_from_stft(stft: np.ndarray, n_fft: int) -> np.ndarray:
-    """(frames,) RMS of each frame from its magnitude spectrum (n_fft // 2 + 1, frames), as
-    ``librosa.feature.rms(S=stft, frame_length=n_fft)[0]`` computes it (Parseval, the DC and
-    Nyquist bins counted once). Written out because importing ``librosa.feature`` loads
-    40 numba functions: about 1 s of the `dance` command's start-up on 2 cores."""
-    power = np.abs(stft) ** 2  # a copy, in the spectrum's own precision as librosa's
-    power[0] *= 0.5
-    if n_fft % 2 == 0:
-        power[-1] *= 0.5
-    return np.sqrt(2.0 * power.sum(axis=0) / n_fft**2)
-
-
 def _features(y: np.ndarray, sr: int, cfg: AnalysisConfig) -> _Features:
-    import librosa
+    from quaddance.music.spectral import (
+        filterbanks,
+        normalize_peak,
+        power_to_db,
+        rms_from_stft,
+        stft_magnitude,
+    )
 
+    banks = filterbanks(sr, cfg.n_fft, cfg.n_mels)
     fps = sr / cfg.hop_length
     # Lead the audio with silence so that a song starting on a hit gets a normal onset; the
     # extra frames are dropped again below.
     lead = -(-cfg.n_fft // cfg.hop_length)
     y = np.concatenate([np.zeros(lead * cfg.hop_length, dtype=y.dtype), y])
-    stft = np.abs(librosa.stft(y, n_fft=cfg.n_fft, hop_length=cfg.hop_length, center=True))
+    stft = stft_magnitude(y, cfg.n_fft, cfg.hop_length)
     power = stft**2
-    mel = librosa.filters.mel(sr=sr, n_fft=cfg.n_fft, n_mels=cfg.n_mels, fmax=sr / 2) @ power
-    mel_hz = librosa.mel_frequencies(n_mels=cfg.n_mels + 2, fmax=sr / 2)[1:-1]
-    low, high = mel_hz <= cfg.low_band_hz, mel_hz >= cfg.high_band_hz
+    mel = banks.mel @ power
+    low, high = banks.mel_hz <= cfg.low_band_hz, banks.mel_hz >= cfg.high_band_hz
 
     def flux(spec: np.ndarray) -> np.ndarray:
         full = np.maximum(0.0, np.diff(spec, axis=1, prepend=spec[:, :1]))
@@ -258,7 +252,7 @@ def _features(y: np.ndarray, sr: int, cfg: AnalysisConfig) -> _Features:
 
     # dB flux (80 dB range) hears every note start; the gentler log1p compression keeps loud
     # hits louder than soft ones, which is what separates drum hits from hats and stabs.
-    flux_db = flux(librosa.power_to_db(mel, ref=np.max, top_db=80.0))
+    flux_db = flux(power_to_db(mel, top_db=80.0))
     flux_log = flux(np.log1p(cfg.log_compression * mel / max(float(mel.max()), 1e-12)))
     stft, power = stft[:, lead:], power[:, lead:]
     raw = flux_db.mean(axis=0)
@@ -273,13 +267,9 @@ def _features(y: np.ndarray, sr: int, cfg: AnalysisConfig) -> _Features:
         unit_mean(raw) + cfg.high_band_weight * unit_mean(high_onset), fps, cfg
     )
     rms = rms_from_stft(stft, cfg.n_fft)
-    # tuning=0 assumes A440: estimating the tuning costs a third of the analysis time and
-    # chroma only needs to tell chords apart.
-    chroma_fb = librosa.filters.chroma(sr=sr, n_fft=cfg.n_fft, tuning=0.0)
-    chroma = librosa.util.normalize(chroma_fb @ power, norm=np.inf, axis=0)
-    freqs_hz = librosa.fft_frequencies(sr=sr, n_fft=cfg.n_fft)
-    bass = (freqs_hz >= 30.0) & (freqs_hz <= cfg.bass_chroma_max_hz)
-    bass_chroma = chroma_fb[:, bass] @ power[bass]
+    chroma = normalize_peak(banks.chroma @ power, axis=0)
+    bass = (banks.freqs_hz >= 30.0) & (banks.freqs_hz <= cfg.bass_chroma_max_hz)
+    bass_chroma = banks.chroma[:, bass] @ power[bass]
     hit = flux_log.mean(axis=0)
     return _Features(tempo_onset, beat_onset, low_onset, raw, rms, hit, chroma, bass_chroma, fps)
 

@@ -289,13 +289,13 @@ class _Features:
     """Causal framing, mel spectrum and the two normalised onset envelopes."""
 
     def __init__(self) -> None:
-        import librosa  # lazy: the CLI's --help must stay fast
+        from quaddance.music.spectral import filterbanks
 
         self.window = np.hanning(N_FFT + 1)[:-1]
-        mel_fb = librosa.filters.mel(sr=SR_HZ, n_fft=N_FFT, n_mels=N_MELS, fmax=SR_HZ / 2)
+        banks = filterbanks(SR_HZ, N_FFT, N_MELS)
         # float64 like the spectrum: a mixed-precision matmul leaves BLAS for a slow loop.
-        self.mel_fb_t = np.ascontiguousarray(mel_fb.T, dtype=np.float64)
-        mel_hz = librosa.mel_frequencies(n_mels=N_MELS + 2, fmax=SR_HZ / 2)[1:-1]
+        self.mel_fb_t = np.ascontiguousarray(banks.mel.T, dtype=np.float64)
+        mel_hz = banks.mel_hz
         self.low = mel_hz <= LOW_BAND_HZ
         self.high = mel_hz >= HIGH_BAND_HZ
         self.chord_bands = (mel_hz >= CHORD_BAND_HZ[0]) & (mel_hz <= CHORD_BAND_HZ[1])

@@ -20,7 +20,8 @@ that dies that way is reported).
 What makes it fast enough (640x480 on 2 cores, see `bench_render`): shadows, reflections and
 multisampling are off, and the Go1's 206 k-triangle visual meshes are simplified in the
 workers' private model copies by vertex clustering (`simplify_meshes`), which looks the same
-at this size and renders several times faster on llvmpipe.
+at this size and renders several times faster on llvmpipe; the infinite floor is drawn as a
+finite one with fewer quads (`finite_planes`).
 """
 
 from __future__ import annotations
@@ -85,6 +86,13 @@ class RenderCfg:
     #: same at that size; 16 mm shows facets (all measured; the full meshes have 206 k
     #: triangles).
     mesh_cell_m: float | None = 0.008
+    #: An infinite floor plane is drawn as this finite square (half size, m) with quads of
+    #: ``floor_grid_m``. MuJoCo draws an infinite plane with up to 200 x 200 quads
+    #: (mjMAXPLANEGRID): 30 ms of llvmpipe's time per 640x480 frame, against 20 ms for 30 m
+    #: with 0.5 m quads, which looks the same except for the haze line at the horizon
+    #: (measured; 1.4 of 255 mean difference below it). None keeps infinite planes.
+    floor_half_size_m: float | None = 30.0
+    floor_grid_m: float = 0.5
     #: Off-screen multisampling; 0 halves llvmpipe's cost (measured 6.6 -> 12.6 frames/s).
     msaa_samples: int = 0
     shadows: bool = False  # 1.6 vs 10.4 frames/s measured with shadows and reflections on/off
@@ -251,6 +259,29 @@ def simplify_meshes(model: mujoco.MjModel, cell_m: float) -> int:
     return total
 
 
+def finite_planes(model: mujoco.MjModel, half_size_m: float, grid_m: float) -> int:
+    """Make every infinite plane of ``model`` (size 0) a finite square, for drawing only.
+
+    Its texture keeps its size on the floor: an infinite plane's material repeats
+    ``texrepeat`` times per metre, as a finite plane's does with ``texuniform`` set (set
+    only on a material that no other kind of geom uses).
+
+    Returns:
+        Number of planes changed.
+    """
+    changed = 0
+    plane = model.geom_type == mujoco.mjtGeom.mjGEOM_PLANE
+    for g in np.flatnonzero(plane):
+        if model.geom_size[g, 0] > 0 and model.geom_size[g, 1] > 0:
+            continue
+        model.geom_size[g] = (half_size_m, half_size_m, grid_m)
+        mat = model.geom_matid[g]
+        if mat >= 0 and not np.any(model.geom_matid[~plane] == mat):
+            model.mat_texuniform[mat] = 1
+        changed += 1
+    return changed
+
+
 class FrameRenderer:
     """Draws poses of one model to RGB arrays. Create it only in a process using EGL."""
 
@@ -262,6 +293,8 @@ class FrameRenderer:
         model.vis.quality.offsamples = cfg.msaa_samples
         if cfg.mesh_cell_m:
             simplify_meshes(model, cfg.mesh_cell_m)
+        if cfg.floor_half_size_m:
+            finite_planes(model, cfg.floor_half_size_m, cfg.floor_grid_m)
         self.data = mujoco.MjData(model)
         self.renderer = mujoco.Renderer(model, height, width)
         flags = self.renderer.scene.flags
@@ -327,6 +360,21 @@ class FrameRenderer:
                 np.asarray(self.cfg.marker_rgba[foot], dtype=np.float32),
             )
             scene.ngeom += 1
+
+
+WORKER_NICE = 5
+"""How much lower the render workers' scheduling priority is than the caller's (nice steps).
+Their start-up is not on the critical path of `dance` on 2 cores, the song's analysis and the
+policy's imports are: a lower priority hands those the cores first and the workers take the
+idle moments; once frames come, the simulation that feeds them goes first too."""
+
+
+def _lower_priority(pid: int, steps: int) -> None:
+    """Make process ``pid`` ``steps`` nice steps less urgent than this one (best effort)."""
+    if steps <= 0 or not hasattr(os, "setpriority"):
+        return
+    with contextlib.suppress(OSError):  # gone already, or not allowed
+        os.setpriority(os.PRIO_PROCESS, pid, min(19, os.getpriority(os.PRIO_PROCESS, 0) + steps))
 
 
 @dataclass(frozen=True)
@@ -612,6 +660,7 @@ class VideoRenderer:
                 proc = ctx.Process(target=_worker, args=(spec, jobs, out, startup), daemon=True)
                 with sigint_ignored_by_children():  # the caller handles Ctrl-C
                     proc.start()
+                _lower_priority(proc.pid, WORKER_NICE)
                 self._jobs.append(jobs)
                 self._outs.append(out)
                 self._procs.append(proc)
