@@ -113,3 +113,22 @@ def test_analysing_a_song_does_not_import_librosa(tmp_path) -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[]"
+
+
+@pytest.mark.parametrize("damage", ["missing", "not a zip", "other keys"])
+def test_a_lost_or_damaged_banks_file_falls_back_to_librosa(tmp_path, monkeypatch, damage) -> None:
+    path = tmp_path / "filterbanks.npz"
+    if damage == "not a zip":
+        path.write_bytes(b"PK\x03\x04 garbage")
+    elif damage == "other keys":
+        np.savez(path, something=np.zeros(3))
+    monkeypatch.setattr(spectral, "_shipped_path", lambda: path)
+    spectral.filterbanks.cache_clear()
+    try:
+        banks = spectral.filterbanks(*spectral.SHIPPED[0])
+    finally:
+        spectral.filterbanks.cache_clear()
+    sr, n_fft, n_mels = spectral.SHIPPED[0]
+    np.testing.assert_array_equal(
+        banks.mel, librosa.filters.mel(sr=sr, n_fft=n_fft, n_mels=n_mels, fmax=sr / 2)
+    )

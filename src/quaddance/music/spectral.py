@@ -15,7 +15,9 @@ on 2 cores (measured: 3.3 s CPU for a 12 s song, 0.1 s of it the analysis itself
 
 from __future__ import annotations
 
+import contextlib
 import functools
+import zipfile
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -75,10 +77,13 @@ def filterbanks(sr: int, n_fft: int, n_mels: int) -> FilterBanks:
     key = _key(sr, n_fft, n_mels)
     banks = None
     if (int(sr), int(n_fft), int(n_mels)) in SHIPPED:
-        # Our own file, written by `write_filterbanks`; never a user's, and never pickled.
-        with np.load(_shipped_path(), allow_pickle=False) as f:
-            if all(f"{key}/{name}" in f.files for name in _FIELDS):
-                banks = {name: f[f"{key}/{name}"] for name in _FIELDS}
+        # Our own file, written by `write_filterbanks`; never a user's, and never pickled. An
+        # install that lost or damaged it still works, at librosa's import cost.
+        with (
+            contextlib.suppress(OSError, ValueError, KeyError, zipfile.BadZipFile),
+            np.load(_shipped_path(), allow_pickle=False) as f,
+        ):
+            banks = {name: f[f"{key}/{name}"] for name in _FIELDS}
     if banks is None:
         banks = _librosa_banks(sr, n_fft, n_mels)
     freqs_hz = np.fft.rfftfreq(n_fft, 1.0 / sr)  # what librosa.fft_frequencies computes
