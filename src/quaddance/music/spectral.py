@@ -30,13 +30,13 @@ SHIPPED = ((22050, 2048, 96), (22050, 1024, 64))
 
 _FIELDS = ("mel", "mel_hz", "chroma")
 _BLOCK_FRAMES = 1024
-"""STFT frames transformed at a time: 8 MB of float32 windows at n_fft 2048, whatever the
-song's length."""
+"""STFT frames transformed at a time: about 33 MB of float64 windows and spectra at n_fft
+2048, whatever the song's length."""
 
 
 @dataclass(frozen=True)
 class FilterBanks:
-    """librosa's filter banks for one (sr, n_fft, n_mels), float32 as librosa returns them."""
+    """librosa's filter banks for one (sr, n_fft, n_mels), in the types librosa returns."""
 
     mel: np.ndarray
     """(n_mels, 1 + n_fft // 2) ``librosa.filters.mel(sr=sr, n_fft=n_fft, n_mels=n_mels,
