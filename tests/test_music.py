@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,7 @@ from quaddance.bench.beats import (
     EXTRA_TUNING_SONGS,
     INSTALL_HINT,
     TICKS_PER_BEAT,
+    MidiSongSpec,
     beat_f_measure,
     find_soundfont,
     metrical_level_f_measure,
@@ -291,3 +293,42 @@ def test_bench_without_fluidsynth_says_how_to_install(
     with pytest.raises(QuaddanceError, match="apt-get install"):
         render_midi(tmp_path / "a.mid", tmp_path / "a.wav", tmp_path / "gm.sf2")
     assert "fluidsynth" in INSTALL_HINT
+
+
+def test_bench_midi_notes_all_end_even_when_swing_overtakes_the_next_note(tmp_path: Path) -> None:
+    """A triplet-swung off-beat sixteenth of an arpeggio lands less than half a sixteenth before
+    the next note: its note must still end after it starts (a hanging note made fluidsynth
+    render a 38 GB file without end)."""
+    import mido
+
+    spec = MidiSongSpec("arp_swing", 122, "rock", "arpeggio", "reggae", 57, 32, 1006, swing=1.0)
+    write_midi(spec, tmp_path / "song.mid")
+    midi = mido.MidiFile(str(tmp_path / "song.mid"))
+    open_notes: dict[tuple[int, int], int] = {}
+    n_notes = 0
+    for msg in mido.merge_tracks(midi.tracks):
+        key = (getattr(msg, "channel", -1), getattr(msg, "note", -1))
+        if msg.type == "note_on" and msg.velocity > 0:
+            assert key not in open_notes, f"note {key} starts again before it ended"
+            open_notes[key] = 1
+            n_notes += 1
+        elif msg.type == "note_off" or (msg.type == "note_on" and msg.velocity == 0):
+            assert open_notes.pop(key, None) is not None, f"note {key} ends before it starts"
+    assert n_notes > 100
+    assert not open_notes
+
+
+def test_bench_midi_render_that_never_ends_fails_clearly(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import quaddance.bench.beats as beats
+
+    def endless(cmd: list[str], **kwargs: object) -> None:
+        Path(cmd[cmd.index("-F") + 1]).write_bytes(b"RIFF")  # the partial file
+        raise subprocess.TimeoutExpired(cmd, kwargs["timeout"])
+
+    monkeypatch.setattr(beats.subprocess, "run", endless)
+    monkeypatch.setattr(shutil, "which", lambda name: "/usr/bin/" + name)
+    with pytest.raises(QuaddanceError, match=r"a\.mid .*did not finish|did not finish .*a\.mid"):
+        render_midi(tmp_path / "a.mid", tmp_path / "a.wav", tmp_path / "gm.sf2")
+    assert not (tmp_path / "a.wav").exists()

@@ -40,6 +40,11 @@ SOUNDFONT_PATHS = (
     "/usr/share/sounds/sf2/TimGM6mb.sf2",
 )
 INSTALL_HINT = "apt-get install -y fluidsynth fluid-soundfont-gm"
+MIN_NOTE_TICKS = TICKS_PER_BEAT // 16
+"""Length given to a note whose computed length is not positive, ticks (a 64th note)."""
+RENDER_TIMEOUT_S = 300.0
+"""fluidsynth renders a benchmark song (under a minute of music) in a few seconds; one that
+takes this long never ends."""
 
 
 def beat_f_measure(
@@ -374,6 +379,12 @@ def write_midi(spec: MidiSongSpec, path: Path) -> np.ndarray:
         return tick
 
     def note(channel: int, pitch: int, velocity: int, start: int, length: int) -> None:
+        # A strongly swung off-beat lands less than half a sixteenth before the next note, so
+        # the "up to the next note" length can come out negative: its note-off would precede
+        # its note-on, leave the note hanging, and fluidsynth then renders without end. Only
+        # those notes change, so every song that rendered before renders the same.
+        if length < 1:
+            length = MIN_NOTE_TICKS
         velocity = int(np.clip(velocity + rng.integers(-6, 7), 1, 127))
         if channel != 9:  # players are not quantised: a few ms of timing spread (not drums)
             start = max(0, start + int(rng.integers(-4, 5)))
@@ -453,7 +464,20 @@ def render_midi(midi_path: Path, wav_path: Path, soundfont: Path, sr: int = 2205
     if shutil.which("fluidsynth") is None:
         raise QuaddanceError(f"the beat benchmark needs fluidsynth: {INSTALL_HINT}")
     cmd = ["fluidsynth", "-ni", "-q", "-r", str(sr), "-F", str(wav_path), str(soundfont)]
-    result = subprocess.run([*cmd, str(midi_path)], capture_output=True, text=True, check=False)
+    try:
+        result = subprocess.run(
+            [*cmd, str(midi_path)],
+            capture_output=True,
+            text=True,
+            check=False,
+            timeout=RENDER_TIMEOUT_S,
+        )
+    except subprocess.TimeoutExpired as err:
+        wav_path.unlink(missing_ok=True)  # an endless render's partial file grows without bound
+        raise QuaddanceError(
+            f"fluidsynth did not finish {midi_path} in {RENDER_TIMEOUT_S:.0f} s "
+            "(a note that never ends?)"
+        ) from err
     if result.returncode != 0 or not wav_path.is_file():
         raise QuaddanceError(f"fluidsynth failed on {midi_path}: {result.stderr.strip()[:300]}")
 
