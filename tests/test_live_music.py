@@ -439,3 +439,44 @@ def test_bench_live_sets_are_what_their_names_say(tmp_path: Path) -> None:
     )
     assert proc.returncode == 2 and "unknown live-bench set(s) ['nope']" in proc.stderr
     assert not out.exists()
+
+
+def test_bench_live_tuning_additions_are_new_songs() -> None:
+    """The songs `bench live` adds to its tuning set are other songs than those of the sets it
+    reports (no name, and no tempo + rhythms + seed, shared with the untuned or random sets),
+    and cover the untuned set's kinds of drum pattern that do not mark the beat."""
+    import dataclasses
+
+    from quaddance.bench.beats import UNTUNED_SONGS, random_midi_songs
+    from quaddance.bench.live import (
+        HELDOUT_SYNTH_SONGS,
+        LIVE_SYNTH_SONGS,
+        LIVE_TUNING_MIDI_SONGS,
+        LIVE_TUNING_RANDOM,
+        LIVE_TUNING_SYNTH_SONGS,
+    )
+
+    tuning = list(LIVE_TUNING_MIDI_SONGS) + [
+        dataclasses.replace(s, name=f"tune_r{seed}_{s.name}")
+        for n, seed in LIVE_TUNING_RANDOM
+        for s in random_midi_songs(n, seed=seed)
+    ]
+    reported = list(UNTUNED_SONGS) + random_midi_songs(12)
+    names = [s.name for s in tuning] + [name for name, _, _ in LIVE_TUNING_SYNTH_SONGS]
+    assert len(set(names)) == len(names)
+    other_names = {s.name for s in reported} | {
+        name for name, _, _ in (*LIVE_SYNTH_SONGS, *HELDOUT_SYNTH_SONGS)
+    }
+    assert not set(names) & other_names
+
+    def music(s):
+        return (s.tempo_bpm, s.style, s.chords, s.bass, s.chord_program, s.swing, s.tempo_change)
+
+    assert not {music(s) for s in tuning} & {music(s) for s in reported}
+    synth_seeds = {p["seed"] for _, parts, _ in LIVE_TUNING_SYNTH_SONGS for p in parts}
+    other_seeds = {
+        p["seed"] for _, parts, _ in (*LIVE_SYNTH_SONGS, *HELDOUT_SYNTH_SONGS) for p in parts
+    }
+    assert not synth_seeds & other_seeds
+    hard = {"offbeat_hats", "clave", "cowbell_sync", "one_drop"}
+    assert hard <= {s.style for s in LIVE_TUNING_MIDI_SONGS}

@@ -231,7 +231,7 @@ EXTRA_TUNING_SONGS: tuple[MidiSongSpec, ...] = (
 # analyser against it; never tune on it. Kinds: fast notations (170-200 BPM), slow notations
 # (40-70 BPM, often with sixteenth-note hats), tempo changes, drums or keys that do not mark the
 # beat, and 140-160 BPM rock with a strong backbeat (the tempo-octave trap).
-def _song(
+def song_spec(
     name: str,
     bpm: float,
     style: str,
@@ -241,25 +241,26 @@ def _song(
     seed: int,
     **kw: Any,
 ) -> MidiSongSpec:
+    """A `MidiSongSpec` written on one line: ``programs`` = (chord program, bass program)."""
     return MidiSongSpec(name, bpm, style, chords, bass, programs[0], programs[1], seed, **kw)
 
 
 UNTUNED_SONGS: tuple[MidiSongSpec, ...] = (
     # fast notations
-    _song("fast_twostep_184", 184, "two_step", "offbeats", "half", (21, 32), 2001),
-    _song("fast_dnb_172_offhats", 172, "dnb_offhats", "sustain", "tresillo", (89, 38), 2002),
-    _song(
+    song_spec("fast_twostep_184", 184, "two_step", "offbeats", "half", (21, 32), 2001),
+    song_spec("fast_dnb_172_offhats", 172, "dnb_offhats", "sustain", "tresillo", (89, 38), 2002),
+    song_spec(
         "fast_jazz_200_swing", 200, "jazz_ride", "charleston", "quarters", (0, 32), 2003, swing=1.0
     ),
-    _song("fast_ska_178", 178, "ska", "offbeats", "quarters", (16, 33), 2004),
-    _song("fast_keys_188", 188, "none", "pushes", "quarters", (4, 35), 2005),
+    song_spec("fast_ska_178", 178, "ska", "offbeats", "quarters", (16, 33), 2004),
+    song_spec("fast_keys_188", 188, "none", "pushes", "quarters", (4, 35), 2005),
     # slow notations
-    _song("slow_halftime_60", 60, "halftime", "sustain", "pushed", (89, 38), 2011),
-    _song("slow_trap_68", 68, "trap", "sustain", "tresillo", (81, 38), 2012),
-    _song("slow_ballad_48", 48, "ballad", "arpeggio", "half", (0, 32), 2013, duration_s=32.0),
-    _song("slow_onedrop_66", 66, "one_drop", "offbeats", "reggae", (16, 33), 2014),
-    _song("slow_keys_54", 54, "none", "anticipated", "half", (4, 32), 2015, duration_s=32.0),
-    _song(
+    song_spec("slow_halftime_60", 60, "halftime", "sustain", "pushed", (89, 38), 2011),
+    song_spec("slow_trap_68", 68, "trap", "sustain", "tresillo", (81, 38), 2012),
+    song_spec("slow_ballad_48", 48, "ballad", "arpeggio", "half", (0, 32), 2013, duration_s=32.0),
+    song_spec("slow_onedrop_66", 66, "one_drop", "offbeats", "reggae", (16, 33), 2014),
+    song_spec("slow_keys_54", 54, "none", "anticipated", "half", (4, 32), 2015, duration_s=32.0),
+    song_spec(
         "slow_soul_42",
         42,
         "halftime",
@@ -271,7 +272,7 @@ UNTUNED_SONGS: tuple[MidiSongSpec, ...] = (
         duration_s=32.0,
     ),
     # tempo changes
-    _song(
+    song_spec(
         "change_rock_90_to_150",
         90,
         "rock",
@@ -281,7 +282,7 @@ UNTUNED_SONGS: tuple[MidiSongSpec, ...] = (
         2021,
         tempo_change=(5, 150.0),
     ),
-    _song(
+    song_spec(
         "change_house_126_ramp_100",
         126,
         "house",
@@ -291,7 +292,7 @@ UNTUNED_SONGS: tuple[MidiSongSpec, ...] = (
         2022,
         tempo_ramp=(3, 8, 100.0),
     ),
-    _song(
+    song_spec(
         "change_bossa_80_to_64",
         80,
         "bossa",
@@ -301,7 +302,7 @@ UNTUNED_SONGS: tuple[MidiSongSpec, ...] = (
         2023,
         tempo_change=(4, 64.0),
     ),
-    _song(
+    song_spec(
         "change_funk_140_ramp_172",
         140,
         "funk",
@@ -312,15 +313,15 @@ UNTUNED_SONGS: tuple[MidiSongSpec, ...] = (
         tempo_ramp=(2, 9, 172.0),
     ),
     # drums or keys that do not mark the beat
-    _song("offbeat_hats_112", 112, "offbeat_hats", "syncopated", "syncopated", (4, 33), 2031),
-    _song("keys_sync_96", 96, "none", "pushes", "syncopated", (0, 32), 2032),
-    _song("clave_120", 120, "clave", "pushes", "tresillo", (11, 35), 2033),
-    _song("bossa_136", 136, "bossa", "charleston", "half", (24, 32), 2034),
-    _song("cowbell_sync_104", 104, "cowbell_sync", "anticipated", "pushed", (5, 38), 2035),
+    song_spec("offbeat_hats_112", 112, "offbeat_hats", "syncopated", "syncopated", (4, 33), 2031),
+    song_spec("keys_sync_96", 96, "none", "pushes", "syncopated", (0, 32), 2032),
+    song_spec("clave_120", 120, "clave", "pushes", "tresillo", (11, 35), 2033),
+    song_spec("bossa_136", 136, "bossa", "charleston", "half", (24, 32), 2034),
+    song_spec("cowbell_sync_104", 104, "cowbell_sync", "anticipated", "pushed", (5, 38), 2035),
     # 140-160 BPM rock with a strong backbeat
-    _song("rock_150_backbeat", 150, "backbeat", "eighths", "eighths", (30, 34), 2041),
-    _song("rock_144_backbeat", 144, "rock", "quarters", "eighths", (29, 33), 2042),
-    _song("rock_158_backbeat", 158, "backbeat", "sustain", "quarters", (27, 34), 2043),
+    song_spec("rock_150_backbeat", 150, "backbeat", "eighths", "eighths", (30, 34), 2041),
+    song_spec("rock_144_backbeat", 144, "rock", "quarters", "eighths", (29, 33), 2042),
+    song_spec("rock_158_backbeat", 158, "backbeat", "sustain", "quarters", (27, 34), 2043),
 )
 
 
