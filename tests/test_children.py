@@ -71,3 +71,31 @@ def test_ready_says_whether_an_answer_is_waiting():
         assert not helper.ready()  # read
     finally:
         helper.close()
+
+
+def test_a_ctrl_c_while_helpers_start_is_taken_at_the_end_not_lost():
+    """Inside `sigint_ignored_by_children` this process ignores SIGINT (so that the helpers
+    it starts inherit the ignore); a SIGINT that comes meanwhile still reaches it, at the end
+    of the block, and the helper started there does not see it."""
+    import os
+    import signal
+    import threading
+
+    from quaddance.children import sigint_ignored_by_children
+
+    received = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: received.append(signum))
+    helper = None
+    try:
+        with sigint_ignored_by_children():
+            assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+            signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
+            helper = HelperProcess()
+            assert received == []  # not yet: the helper must start with SIGINT ignored
+        assert received == [signal.SIGINT]
+        os.kill(helper._proc.pid, signal.SIGINT)  # a Ctrl-C to the whole group reaches it too
+        assert helper.call(statistics.mean, data=[1, 3]) == 2  # and it works on
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if helper is not None:
+            helper.close()
