@@ -9,7 +9,7 @@ starts stays ignored in the new program, and Python keeps it so, so helpers star
 well: a Ctrl-C that comes while SIGINT is ignored then waits (Linux keeps a signal pending
 while the thread it is for blocks it, even an ignored one) and arrives when the block ends,
 instead of being lost. A test's group Ctrl-C one second into `dance`, while the song's helper
-started, went unnoticed in 2 of 36 runs before, in none of 44 since. (Another thread of this
+started, went unnoticed in 2 of 8 runs before, in none of 56 since. (Another thread of this
 process, where one runs, can still take such a Ctrl-C and drop it.)
 """
 
