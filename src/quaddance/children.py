@@ -9,8 +9,8 @@ starts stays ignored in the new program, and Python keeps it so, so helpers star
 well: a Ctrl-C that comes while SIGINT is ignored then waits (Linux keeps a signal pending
 while the thread it is for blocks it, even an ignored one) and arrives when the block ends,
 instead of being lost. A test's group Ctrl-C one second into `dance`, while the song's helper
-started, went unnoticed in 2 of 8 runs before, in none of 56 since. (Another thread of this
-process, where one runs, can still take such a Ctrl-C and drop it.)
+started, went unnoticed in 2 of 7 runs before, in 1 of 68 since: another thread of this
+process (numpy's BLAS threads already run then) can still take such a Ctrl-C and drop it.
 """
 
 from __future__ import annotations
