@@ -452,22 +452,16 @@ def test_bench_live_tuning_additions_are_new_songs() -> None:
     """The songs `bench live` adds to its tuning set are other songs than those of the sets it
     reports (no name, and no tempo + rhythms + seed, shared with the untuned or random sets),
     and cover the untuned set's kinds of drum pattern that do not mark the beat."""
-    import dataclasses
-
     from quaddance.bench.beats import UNTUNED_SONGS, random_midi_songs
     from quaddance.bench.live import (
         HELDOUT_SYNTH_SONGS,
         LIVE_SYNTH_SONGS,
         LIVE_TUNING_MIDI_SONGS,
-        LIVE_TUNING_RANDOM,
         LIVE_TUNING_SYNTH_SONGS,
+        live_tuning_midi_specs,
     )
 
-    tuning = list(LIVE_TUNING_MIDI_SONGS) + [
-        dataclasses.replace(s, name=f"tune_r{seed}_{s.name}")
-        for n, seed in LIVE_TUNING_RANDOM
-        for s in random_midi_songs(n, seed=seed)
-    ]
+    tuning = live_tuning_midi_specs()
     reported = list(UNTUNED_SONGS) + random_midi_songs(12)
     names = [s.name for s in tuning] + [name for name, _, _ in LIVE_TUNING_SYNTH_SONGS]
     assert len(set(names)) == len(names)

@@ -33,6 +33,7 @@ import numpy as np
 
 from quaddance.bench.beats import (
     F_MEASURE_WINDOW_S,
+    BenchSong,
     MidiSongSpec,
     beat_f_measure,
     bench_songs,
@@ -216,22 +217,30 @@ LIVE_TUNING_SYNTH_SONGS: tuple[tuple[str, tuple[dict[str, Any], ...], float], ..
 set."""
 
 
-def live_tuning_songs(sr: int, cache_dir: Path = Path("benchmarks/cache")) -> list[LiveSong]:
-    """This benchmark's additions to the ``tuning`` set (see `LIVE_TUNING_MIDI_SONGS`)."""
+def live_tuning_midi_specs() -> list[MidiSongSpec]:
+    """The General MIDI songs of this benchmark's additions to the ``tuning`` set:
+    `LIVE_TUNING_MIDI_SONGS` and the renamed `LIVE_TUNING_RANDOM` songs."""
     import dataclasses
 
-    from quaddance.bench.beats import _cached_midi_song, find_soundfont, random_midi_songs
+    from quaddance.bench.beats import random_midi_songs
 
-    soundfont = find_soundfont()
     randoms = [
         dataclasses.replace(s, name=f"tune_r{seed}_{s.name}")
         for n, seed in LIVE_TUNING_RANDOM
         for s in random_midi_songs(n, seed=seed)
     ]
-    out = []
-    for spec in (*LIVE_TUNING_MIDI_SONGS, *randoms):
-        song, _ = _cached_midi_song(spec, "tuning", soundfont, sr, cache_dir)
-        out.append(LiveSong(song.name, "tuning", song.y, song.beats_s, song.beats_s[::4]))
+    return [*LIVE_TUNING_MIDI_SONGS, *randoms]
+
+
+def live_tuning_songs(sr: int, cache_dir: Path = Path("benchmarks/cache")) -> list[LiveSong]:
+    """This benchmark's additions to the ``tuning`` set (see `LIVE_TUNING_MIDI_SONGS`)."""
+    from quaddance.bench.beats import _cached_midi_song, find_soundfont
+
+    soundfont = find_soundfont()
+    out = [
+        _live_song(_cached_midi_song(spec, "tuning", soundfont, sr, cache_dir)[0])
+        for spec in live_tuning_midi_specs()
+    ]
     return out + _synth_songs(LIVE_TUNING_SYNTH_SONGS, "tuning", sr)
 
 
@@ -292,8 +301,12 @@ def live_case_songs(
 
 def _beat_songs(sets: tuple[str, ...], sr: int, n_random: int, cache_dir: Path) -> list[LiveSong]:
     songs = bench_songs(sets, sr=sr, n_random=n_random, cache_dir=cache_dir)
+    return [_live_song(s) for s in songs]
+
+
+def _live_song(song: BenchSong) -> LiveSong:
     # Every beat-bench song is in 4/4 and starts on a downbeat.
-    return [LiveSong(s.name, s.set, s.y, s.beats_s, s.beats_s[::4]) for s in songs]
+    return LiveSong(song.name, song.set, song.y, song.beats_s, song.beats_s[::4])
 
 
 def track_online(y: np.ndarray, sr: int) -> tuple[list[Any], list[tuple[float, bool]], float]:

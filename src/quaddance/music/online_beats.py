@@ -428,6 +428,7 @@ class OnlineBeatTracker:
             self._frame(tempo_o, beat_o, low_o, rms, mel_db, frame_t)
         events = []
         while self._scheduled and self._scheduled[0] <= t_end_s:
+            # Counted even when not reported, so that the bar position stays on the grid.
             beat = self._emit(self._scheduled.pop(0), t_end_s)
             if self._silent_frames < SILENT_BEAT_PERIODS * self._period:
                 events.append(beat)
