@@ -15,7 +15,12 @@ import pytest
 import soundfile as sf
 
 from quaddance.choreo.accents import beat_coverage, motion_accents_s
-from quaddance.live.choreographer import LOOKAHEAD_S, LiveChoreographer
+from quaddance.live.choreographer import (
+    CALM_CHUNK_S,
+    CALM_LOOKAHEAD_S,
+    LOOKAHEAD_S,
+    LiveChoreographer,
+)
 from quaddance.targets import TargetConfig
 
 HZ = 50.0
@@ -37,8 +42,10 @@ def _run(lock_from_s: float, duration_s: float, period_of=lambda t: 0.5) -> Live
     lc = LiveChoreographer(HZ, seed=3)
     for i in range(round(duration_s / 0.05)):
         now = i * 0.05
-        n = lc.update(_state(now, now >= lock_from_s, period_of(now)), now)
-        assert n / HZ >= now + LOOKAHEAD_S  # final targets always ahead of the music
+        locked = now >= lock_from_s
+        n = lc.update(_state(now, locked, period_of(now)), now)
+        # Final targets always ahead of the music, a bar more once dancing.
+        assert n / HZ >= now + (LOOKAHEAD_S if locked else CALM_LOOKAHEAD_S)
     return lc
 
 
@@ -54,6 +61,9 @@ def test_dance_after_lock_is_smooth_feasible_and_on_the_beat():
     t = np.arange(rows.shape[0]) / HZ
     cfg = TargetConfig()
     assert np.all(rows[t < 3.0] == 0.0)  # calm until the lock
+    # The first bar is planned from where the calm rows end, which is not far ahead.
+    first_s = min(s.start_s for s in lc.segments if s.move != "calm")
+    assert first_s <= 3.0 + CALM_LOOKAHEAD_S + CALM_CHUNK_S
     assert rows[:, :2].max() > 0.05 and np.ptp(rows[:, 4:], axis=0).min() > 0.01
     assert rows[:, :2].max() <= cfg.max_height_m + 1e-9
     assert np.all(rows[:, 2:4] == 0.0)  # rear feet down
@@ -86,6 +96,35 @@ def test_one_front_paw_up_at_a_time_across_segment_seams(period_s):
         edges = np.flatnonzero(np.diff(either.astype(np.int8)))
         ground_steps = edges[2::2] - edges[1:-1:2]  # rows down between two lifts
         assert ground_steps.min() >= min_gap
+
+
+def test_a_seam_hands_the_trunk_to_the_new_plan_smoothly_by_its_first_beat():
+    """The trunk cross-fades from the old plan's tail to the new plan over ``fade_steps`` and
+    is the new plan's own from there: a fade that reached past the segment's first beat
+    halved its gesture (one beat in twelve of the tuning songs lost its accent). The fade's
+    weight is minimum-jerk, so the trunk's velocity does not jump where it starts or ends."""
+    n_old, start, n_fade = 200, 100, 25
+    t = np.arange(n_old + 150) / HZ
+    old = np.zeros((n_old, 8))
+    old[:, 4] = 0.03 * np.sin(2.0 * np.pi * t[:n_old])
+    old[:, 6] = 0.1 * np.cos(1.5 * np.pi * t[:n_old])
+    new = np.zeros((150, 8))
+    new[:, 4] = -0.02 * np.cos(3.0 * np.pi * t[start : start + 150])
+    new[:, 6] = 0.05 * np.sin(2.0 * np.pi * t[start : start + 150])
+    lc = LiveChoreographer(HZ)
+    lc._write(0, old)
+    lc._write(start, new, fade_steps=n_fade)
+    rows = lc.rows
+    np.testing.assert_array_equal(rows[:start], old[:start])  # final rows never change
+    np.testing.assert_allclose(rows[start + n_fade :, 4:], new[n_fade:, 4:])
+    vel = np.diff(rows[:, 4:], axis=0)
+    vel_old, vel_new = np.diff(old[:, 4:], axis=0), np.diff(new[:, 4:], axis=0)
+    # At both ends of the fade the velocity is the plan's own (a linear weight adds the
+    # plans' gap over the fade, about (new - old) / n_fade = 2e-3 per step here).
+    for k in (start - 1, start):
+        assert np.abs(vel[k] - vel_old[k]).max() < 5e-4, k
+    for k in (start + n_fade - 1, start + n_fade):
+        assert np.abs(vel[k] - vel_new[k - start]).max() < 5e-4, k
 
 
 def test_a_tempo_change_is_followed_bar_by_bar():

@@ -10,7 +10,8 @@ the last beat finishes in the next segment's time (paws: the higher target; trun
 cross-faded). Without a stable lock the robot holds a calm standing pose.
 
 Rows are committed up to `planned_until_step` only (what follows is a tail that the next
-segment may still change); `LOOKAHEAD_S` keeps them ahead of the dance, preview included.
+segment may still change); `LOOKAHEAD_S` keeps them ahead of the dance, preview included
+(`CALM_LOOKAHEAD_S` without a lock).
 """
 
 from __future__ import annotations
@@ -21,14 +22,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from quaddance.choreo.body import choreograph_body, plan_body
-from quaddance.choreo.choreographer import choreograph
+from quaddance.choreo.choreographer import choreograph, min_jerk
 from quaddance.choreo.grid import MusicGrid
 from quaddance.targets import TargetConfig, feasible_body_targets, robot_targets
 
-#: Committed targets reach at least this far past the song's "now", s: the policy's preview
-#: (0.4 s) plus the audio-to-command latency (45 ms), with 0.25 s for planning a bar (at most
-#: 14 ms measured). Every 0.1 s of it delays the first move after a lock by as much (1.0 s
-#: left 1.3-2.2 s between a lock and the first accent on a steady grid; 0.7 s, 1.0-1.7 s).
+#: While dancing, committed targets reach at least this far (and a bar more) past the song's
+#: "now", s: the policy's preview (0.4 s) plus the audio-to-command latency (45 ms), with
+#: 0.25 s for planning a bar (at most 14 ms measured).
 LOOKAHEAD_S = 0.7
 #: Rate at which the human dance is rendered before it becomes robot targets (CHOREO_FPS).
 HUMAN_FPS = 60.0
@@ -37,8 +37,13 @@ TAIL_BEATS = 1.0
 #: Loudness history the choreographer reads, s: "loud" means loud for this song so far.
 ENERGY_HISTORY_S = 20.0
 ENERGY_FPS = 10.0
-#: Length of a calm (no lock) chunk, s: short, so that a plan starts soon after a lock.
-CALM_CHUNK_S = 0.1
+#: Without a lock, calm rows are final only this far past "now", s: the preview plus the
+#: latency, with 55 ms for the first plan after a lock, which starts where they end (if it
+#: came late, the preview would hold the calm pose a few ticks longer: harmless). 0.2 s less
+#: than `LOOKAHEAD_S`, so the first move after a lock comes 0.2 s sooner.
+CALM_LOOKAHEAD_S = 0.5
+#: Length of a calm chunk, s: short, so that a plan starts soon after a lock.
+CALM_CHUNK_S = 0.04
 BEATS_PER_BAR = 4
 
 
@@ -79,8 +84,8 @@ class LiveChoreographer:
         if np.isfinite(state.energy):
             self._energy.append((now_s, float(state.energy)))
         locked = bool(state.locked) and state.beat_period_s > 0 and np.isfinite(state.next_beat_s)
-        bar_s = BEATS_PER_BAR * state.beat_period_s if locked else 0.0
-        while self.planned_until_step / self.hz < now_s + LOOKAHEAD_S + bar_s:
+        ahead_s = LOOKAHEAD_S + BEATS_PER_BAR * state.beat_period_s if locked else CALM_LOOKAHEAD_S
+        while self.planned_until_step / self.hz < now_s + ahead_s:
             if locked:
                 self._plan_bar(state)
             else:
@@ -160,7 +165,9 @@ class LiveChoreographer:
         body, _ = feasible_body_targets(body_human, HUMAN_FPS, t_out, paws)
         rows = np.concatenate([paws, body], axis=1)[start_step - origin_step :]
         _drop_cut_lifts(rows)
-        self._write(start_step, rows, fade_steps=round(period * self.hz))
+        # The trunk hands over from the old plan by the segment's first beat, so that
+        # beat's gesture is the new plan's own (a fade past it halved a downbeat's accent).
+        self._write(start_step, rows, fade_steps=round((seg_beats[0] - start_s) * self.hz))
         # Final up to the segment's last beat: its lift falls, and the next segment's first
         # lift rises, in the overlap that the next plan blends.
         commit_s = max(start_s + 1.0 / self.hz, end_s - period)
@@ -181,20 +188,20 @@ class LiveChoreographer:
     def _write(self, start: int, new: np.ndarray, fade_steps: int = 0) -> None:
         """Put ``new`` rows at ``start``. Over an earlier plan's tail the paws take the
         higher target; the trunk cross-fades from the old plan (or, past its end, from the
-        last final pose held) to the new one over at least ``fade_steps``, so it never
-        jumps."""
+        last final pose held) to the new one over ``fade_steps``, with a minimum-jerk weight
+        so that position, velocity and acceleration stay continuous at both ends."""
         have = self.rows.shape[0]
-        n_fade = min(new.shape[0], max(fade_steps, have - start))
+        new = new.copy()
+        n_tail = max(0, min(have - start, new.shape[0]))
+        new[:n_tail, :4] = np.maximum(self.rows[start : start + n_tail, :4], new[:n_tail, :4])
+        n_fade = min(new.shape[0], fade_steps)
         if n_fade > 0:
-            last = self.rows[start - 1] if start > 0 else np.zeros(8)
+            last = self.rows[start - 1, 4:] if start > 0 else np.zeros(4)
             old = np.tile(last, (n_fade, 1))
-            old[:, :4] = 0.0  # paws beyond an old tail are down
-            n_old = max(0, min(have - start, n_fade))
-            old[:n_old] = self.rows[start : start + n_old]
-            w = (np.arange(1, n_fade + 1) / (n_fade + 1))[:, None]
-            new = new.copy()
-            new[:n_fade, :4] = np.maximum(old[:, :4], new[:n_fade, :4])
-            new[:n_fade, 4:] = (1 - w) * old[:, 4:] + w * new[:n_fade, 4:]
+            n_old = min(n_tail, n_fade)
+            old[:n_old] = self.rows[start : start + n_old, 4:]
+            w = min_jerk(np.arange(1, n_fade + 1) / (n_fade + 1))[:, None]
+            new[:n_fade, 4:] = (1 - w) * old + w * new[:n_fade, 4:]
         self.rows = np.concatenate([self.rows[:start], new], axis=0)
         _one_paw_at_a_time(self.rows, start, round(self.cfg.min_ground_s * self.hz))
 
