@@ -1,16 +1,17 @@
 """Helper processes that a terminal's Ctrl-C does not interrupt.
 
 Ctrl-C sends SIGINT to the whole process group: the command's helpers (render workers, the
-song's analysis) as well as the command. The command handles it (one line, exit 130, outputs
-complete or absent) and stops its helpers; a helper that took it itself would print a
-traceback of its own, often from the middle of an import. A signal ignored when a process
-starts stays ignored in the new program, and Python keeps it so, so helpers started inside
-`sigint_ignored_by_children` never see Ctrl-C. Its main thread blocks SIGINT meanwhile as
-well: a Ctrl-C that comes while SIGINT is ignored then waits (Linux keeps a signal pending
-while the thread it is for blocks it, even an ignored one) and arrives when the block ends,
-instead of being lost. A test's group Ctrl-C one second into `dance`, while the song's helper
-started, went unnoticed in 2 of 7 runs before, in 1 of 68 since: another thread of this
-process (numpy's BLAS threads already run then) can still take such a Ctrl-C and drop it.
+song's analysis, the live listener) as well as the command. The command handles it (one
+line, exit 130, outputs complete or absent) and stops its helpers; a helper that took it
+itself would print a traceback of its own, often from the middle of an import.
+
+So helpers start inside `sigint_blocked_for_children` and call `ignore_sigint` first thing.
+A signal mask survives fork and exec: a helper starts with SIGINT blocked, a Ctrl-C that
+reaches it while it imports waits, and `ignore_sigint` then drops it and ignores the next.
+This process keeps a handler meanwhile. The earlier design ignored SIGINT here while helpers
+started, so that they inherited the ignore; a Ctrl-C in that window reached this process as
+well, and when Linux handed it to another thread (numpy's BLAS threads run by then) it was
+dropped: `dance` missed a group Ctrl-C 1 second in, in 1 of 68 tries.
 """
 
 from __future__ import annotations
@@ -21,32 +22,45 @@ import threading
 from collections.abc import Callable, Iterator
 from typing import Any
 
+_inside = threading.local()  # per thread: inside `sigint_blocked_for_children`
+
 
 @contextlib.contextmanager
-def sigint_ignored_by_children() -> Iterator[None]:
-    """Start helper processes inside this block. This process ignores and blocks SIGINT
-    meanwhile (a few milliseconds) and takes a Ctrl-C that came at the end; outside the main
-    thread, where handlers cannot change, it does nothing."""
-    if (
-        threading.current_thread() is not threading.main_thread()
-        or signal.getsignal(signal.SIGINT) is signal.SIG_IGN
-    ):
-        # Nothing to change; and inside another such block, setting SIG_IGN again at the end
-        # would drop a Ctrl-C that is waiting for the outer block's end.
-        yield
+def sigint_blocked_for_children() -> Iterator[None]:
+    """Start helper processes inside this block (they must call `ignore_sigint`). The
+    calling thread blocks SIGINT meanwhile, so the helpers inherit the block. In the main
+    thread a Ctrl-C that comes meanwhile is held and handed to this process's handler at
+    the end, so it cannot interrupt a helper's start half-way."""
+    if getattr(_inside, "depth", 0):
+        yield  # the outer block holds and hands over
         return
     from multiprocessing import resource_tracker
 
-    # Starting multiprocessing's resource tracker unblocks SIGINT, which would drop a pending
-    # Ctrl-C while SIGINT is ignored: have it running first (it ignores Ctrl-C on its own).
+    # Starting multiprocessing's resource tracker unblocks SIGINT in the calling thread:
+    # have it running first, or helpers started after it would not inherit the block.
     resource_tracker.ensure_running()
+    held: list[int] = []
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGINT, lambda signum, frame: held.append(signum))
     mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _inside.depth = 1
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
-        signal.pthread_sigmask(signal.SIG_SETMASK, mask)  # a Ctrl-C that came arrives now
+        _inside.depth = 0
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)  # one sent to this thread arrives
+        if held:
+            signal.raise_signal(signal.SIGINT)  # one that another thread took
+
+
+def ignore_sigint() -> None:
+    """First thing in a helper started inside `sigint_blocked_for_children`: ignore SIGINT
+    (which also drops one that came while the helper started) and unblock it."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
 class HelperProcess:
@@ -68,7 +82,7 @@ class HelperProcess:
         ctx = mp.get_context("spawn")
         self._conn, child_conn = ctx.Pipe()
         self._proc = ctx.Process(target=_helper_main, args=(child_conn,), daemon=True)
-        with sigint_ignored_by_children():
+        with sigint_blocked_for_children():
             self._proc.start()
         child_conn.close()
         self._waiting = 0  # calls sent whose answers are not read yet
@@ -125,6 +139,7 @@ def _helper_main(conn: Any) -> None:
     import os
     import traceback
 
+    ignore_sigint()
     code = 0
     try:
         while (job := conn.recv()) is not None:

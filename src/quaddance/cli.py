@@ -1237,6 +1237,11 @@ def main() -> None:
     and SIGTERM one line and exit status 130 / 143 (outputs complete or absent)."""
     import signal
 
+    # This process never renders (video frames are drawn in worker processes, which get
+    # EGL: `play.video`). Without a MUJOCO_GL, MuJoCo's import loads GLFW, whose import runs
+    # a Python subprocess; a Ctrl-C in the first second of a command then printed that
+    # subprocess's traceback.
+    os.environ.setdefault("MUJOCO_GL", "disable")
     received = _stop_on_signals()
     try:
         try:

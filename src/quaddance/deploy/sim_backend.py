@@ -34,6 +34,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from quaddance.children import ignore_sigint, sigint_blocked_for_children
 from quaddance.deploy.robot import FAULTS, JointCommand, Reading, Robot, realtime_priority
 from quaddance.deploy.safety import effort_limits_nm
 from quaddance.errors import QuaddanceError
@@ -323,9 +324,7 @@ def _main(argv: list[str] | None = None) -> None:
     cfg = SimRobotCfg.from_json(args.config) if args.config != "{}" else SimRobotCfg()
     # The runner's Ctrl-C reaches the whole process group; the robot keeps running until
     # the runner has sent its damping commands and says quit.
-    import signal
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    ignore_sigint()
     with realtime_priority(SIM_RT_PRIORITY):
         proc = _SimProcess(cfg, args.runner_port)
         proc.run(args.truth)
@@ -355,7 +354,8 @@ class SimRobot(Robot):
 
     def start(self, timeout_s: float = 30.0) -> Reading:
         port = self._sock.getsockname()[1]
-        with open(self._stderr_path, "wb") as err:
+        # It starts with SIGINT blocked, so a Ctrl-C while it imports cannot end it.
+        with open(self._stderr_path, "wb") as err, sigint_blocked_for_children():
             self._proc = subprocess.Popen(
                 [
                     sys.executable,

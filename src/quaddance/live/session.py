@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from quaddance.children import ignore_sigint, sigint_blocked_for_children
 from quaddance.errors import QuaddanceError
 
 #: Dance length for a microphone without --seconds, s.
@@ -72,10 +73,8 @@ class _Update:
 
 def _listen(spec: dict, out: Any, go: Any, stop: Any) -> None:
     """Child process: audio -> beats -> choreography, one `_Update` per block."""
-    import signal
-
     # Ctrl-C is the runner's to handle (damping first); this process ends on `stop`.
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    ignore_sigint()
     try:
         from quaddance.live.choreographer import LiveChoreographer
         from quaddance.music.live import FileSource, MicSource
@@ -245,7 +244,8 @@ def run_live(job: LiveJob, status=lambda msg: None) -> tuple[dict, dict[str, Pat
     }
     status("opening the audio input and loading the beat tracker")
     listener = ctx.Process(target=_listen, args=(spec, updates, go, stop), daemon=True)
-    listener.start()
+    with sigint_blocked_for_children():
+        listener.start()
     viewer = None
     try:
         kind, value = _first_message(updates, listener)

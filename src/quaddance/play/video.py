@@ -44,7 +44,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from quaddance.children import sigint_ignored_by_children
+from quaddance.children import ignore_sigint, sigint_blocked_for_children
 from quaddance.errors import InputFileError, QuaddanceError
 from quaddance.fileio import atomic_path, write_json
 from quaddance.play.metrics import gaussian_smooth
@@ -520,6 +520,7 @@ def _worker(spec: _WorkerSpec, jobs: Any, out: Any, startup: Any) -> None:
     The workers start up one at a time (``startup``, a semaphore): meanwhile the caller is
     the critical path (music analysis) and keeps a core of a 2-core machine to itself.
     """
+    ignore_sigint()  # the caller handles Ctrl-C
     if spec.n_workers > 1:
         # The workers are the parallelism: llvmpipe's own rasteriser threads only add
         # hand-offs (measured 27.7 -> 23.8 ms CPU per 640x480 frame single-threaded). Read
@@ -642,7 +643,9 @@ class VideoRenderer:
         self._outs: list[Any] = []
         self._procs: list[Any] = []
         # The workers inherit this environment; MuJoCo reads MUJOCO_GL when they import it.
-        os.environ.setdefault("MUJOCO_GL", "egl")
+        # A user's backend wins; "disable" is what the command line sets for itself.
+        if os.environ.get("MUJOCO_GL", "").strip().lower() in ("", "disable"):
+            os.environ["MUJOCO_GL"] = "egl"
         ctx = mp.get_context("spawn")
         # Kept on self: the workers open it by name after __init__ has returned.
         self._startup = startup = ctx.Semaphore(1)
@@ -658,7 +661,7 @@ class VideoRenderer:
                 jobs = ctx.Queue()
                 out = ctx.Queue(maxsize=_FRAMES_AHEAD)
                 proc = ctx.Process(target=_worker, args=(spec, jobs, out, startup), daemon=True)
-                with sigint_ignored_by_children():  # the caller handles Ctrl-C
+                with sigint_blocked_for_children():  # the caller handles Ctrl-C
                     proc.start()
                 _lower_priority(proc.pid, WORKER_NICE)
                 self._jobs.append(jobs)
