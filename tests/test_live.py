@@ -101,7 +101,7 @@ def test_one_front_paw_up_at_a_time_across_segment_seams(period_s):
 def test_a_seam_hands_the_trunk_to_the_new_plan_smoothly_by_its_first_beat():
     """The trunk cross-fades from the old plan's tail to the new plan over ``fade_steps`` and
     is the new plan's own from there: a fade that reached past the segment's first beat
-    halved its gesture (one beat in twelve of the tuning songs lost its accent). The fade's
+    halved its gesture (one downbeat in six of the tuning songs lost its accent). The fade's
     weight is minimum-jerk, so the trunk's velocity does not jump where it starts or ends."""
     n_old, start, n_fade = 200, 100, 25
     t = np.arange(n_old + 150) / HZ
