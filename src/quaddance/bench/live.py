@@ -468,16 +468,13 @@ GOAL_LOOP_P99_MS = 20.0
 
 def _accent_stats(accents_s: np.ndarray, beats_s: np.ndarray, tol_s: float) -> tuple[float, float]:
     """(fraction of beats with an accent within tol, median |offset| of those, ms)."""
-    if beats_s.size == 0:
-        return 0.0, float("nan")
-    if accents_s.size == 0:
-        return 0.0, float("nan")
-    idx = np.clip(np.searchsorted(accents_s, beats_s), 1, accents_s.size - 1)
-    left, right = accents_s[idx - 1], accents_s[np.minimum(idx, accents_s.size - 1)]
-    off = np.minimum(np.abs(beats_s - left), np.abs(beats_s - right))
-    hit = off <= tol_s
-    median_ms = float(np.median(off[hit]) * 1e3) if hit.any() else float("nan")
-    return float(hit.mean()), median_ms
+    from quaddance.choreo.accents import accent_offsets_s
+
+    offsets = accent_offsets_s(accents_s, beats_s)
+    hit = offsets <= tol_s
+    if not hit.any():
+        return (0.0 if offsets.size == 0 else float(hit.mean())), float("nan")
+    return float(hit.mean()), float(np.median(offsets[hit]) * 1e3)
 
 
 def bench_live_dance(

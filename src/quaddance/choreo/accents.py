@@ -65,17 +65,21 @@ def motion_accents_s(
     return np.sort(np.concatenate(found))
 
 
+def accent_offsets_s(accents_s: np.ndarray, beats_s: np.ndarray) -> np.ndarray:
+    """Distance from each of ``beats_s`` to its nearest accent, s; (N,), inf without
+    accents."""
+    beats = np.asarray(beats_s, dtype=np.float64).reshape(-1)
+    accents = np.sort(np.asarray(accents_s, dtype=np.float64).reshape(-1))
+    if accents.size == 0:
+        return np.full(beats.size, np.inf)
+    i = np.clip(np.searchsorted(accents, beats), 1, accents.size) - 1
+    j = np.clip(i + 1, 0, accents.size - 1)
+    return np.minimum(np.abs(accents[i] - beats), np.abs(accents[j] - beats))
+
+
 def beat_coverage(
     accents_s: np.ndarray, beats_s: np.ndarray, tol_s: float = BEAT_TOLERANCE_S
 ) -> float:
     """Fraction of ``beats_s`` with an accent within +-``tol_s``; 0 when there are no beats."""
-    beats = np.asarray(beats_s, dtype=np.float64).reshape(-1)
-    accents = np.sort(np.asarray(accents_s, dtype=np.float64).reshape(-1))
-    if beats.size == 0:
-        return 0.0
-    if accents.size == 0:
-        return 0.0
-    i = np.clip(np.searchsorted(accents, beats), 1, accents.size) - 1
-    j = np.clip(i + 1, 0, accents.size - 1)
-    nearest = np.minimum(np.abs(accents[i] - beats), np.abs(accents[j] - beats))
-    return float(np.mean(nearest <= tol_s))
+    offsets = accent_offsets_s(accents_s, beats_s)
+    return float(np.mean(offsets <= tol_s)) if offsets.size else 0.0
