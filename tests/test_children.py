@@ -108,3 +108,42 @@ def test_a_ctrl_c_while_helpers_start_is_handled_here_and_not_by_them():
         signal.signal(signal.SIGINT, previous)
         if helper is not None:
             helper.close()
+
+
+def test_nested_blocks_hold_to_the_outer_end_and_other_threads_block_only_themselves():
+    import signal
+    import threading
+
+    from quaddance.children import sigint_blocked_for_children
+
+    received = []
+
+    def handler(signum, frame):
+        received.append(signum)
+
+    previous = signal.signal(signal.SIGINT, handler)
+    try:
+        with sigint_blocked_for_children():
+            with sigint_blocked_for_children():
+                pass
+            # Still blocked after the inner block: a Ctrl-C waits for the outer one's end.
+            signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
+            assert signal.SIGINT in signal.pthread_sigmask(signal.SIG_BLOCK, [])
+            assert received == []
+        assert received == [signal.SIGINT]
+        assert signal.SIGINT not in signal.pthread_sigmask(signal.SIG_BLOCK, [])
+
+        masks = []
+
+        def start_helpers_here():
+            with sigint_blocked_for_children():
+                masks.append(signal.SIGINT in signal.pthread_sigmask(signal.SIG_BLOCK, []))
+            masks.append(signal.SIGINT in signal.pthread_sigmask(signal.SIG_BLOCK, []))
+
+        worker = threading.Thread(target=start_helpers_here)
+        worker.start()
+        worker.join()
+        assert masks == [True, False]  # helpers started there inherit the block
+        assert signal.getsignal(signal.SIGINT) is handler  # this process's handler stays
+    finally:
+        signal.signal(signal.SIGINT, previous)

@@ -40,16 +40,22 @@ def sigint_blocked_for_children() -> Iterator[None]:
     # have it running first, or helpers started after it would not inherit the block.
     resource_tracker.ensure_running()
     held: list[int] = []
-    previous = None
-    if threading.current_thread() is threading.main_thread():
-        previous = signal.signal(signal.SIGINT, lambda signum, frame: held.append(signum))
+    # Handlers change only in the main thread, and one not set from Python (None) could
+    # not be put back.
+    hold = (
+        threading.current_thread() is threading.main_thread()
+        and signal.getsignal(signal.SIGINT) is not None
+    )
+    previous = (
+        signal.signal(signal.SIGINT, lambda signum, frame: held.append(signum)) if hold else None
+    )
     mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     _inside.depth = 1
     try:
         yield
     finally:
         _inside.depth = 0
-        if previous is not None:
+        if hold:
             signal.signal(signal.SIGINT, previous)
         signal.pthread_sigmask(signal.SIG_SETMASK, mask)  # one sent to this thread arrives
         if held:
