@@ -481,3 +481,38 @@ def test_bench_live_tuning_additions_are_new_songs() -> None:
     assert not synth_seeds & other_seeds
     hard = {"offbeat_hats", "clave", "cowbell_sync", "one_drop"}
     assert hard <= {s.style for s in LIVE_TUNING_MIDI_SONGS}
+
+
+def test_bench_live_whole_loop_tuning_songs_are_tuning_songs(monkeypatch) -> None:
+    """`bench live --sets tuning` runs the whole loop on `LIVE_DANCE_TUNING_SONGS`: songs of
+    the tuning set only (the live choreographer is tuned on them), none of a reported set."""
+    import quaddance.bench.live as bench_live
+    from quaddance.bench.beats import BENCH_SONGS, EXTRA_TUNING_SONGS, SYNTH_SONGS
+    from quaddance.bench.live import (
+        LIVE_DANCE_TUNING_SONGS,
+        LIVE_TUNING_SYNTH_SONGS,
+        LiveSong,
+        live_dance_songs,
+        live_tuning_midi_specs,
+    )
+
+    tuning = {s.name for s in (*BENCH_SONGS, *EXTRA_TUNING_SONGS, *live_tuning_midi_specs())}
+    tuning |= {s["name"] for s in SYNTH_SONGS} | {n for n, _, _ in LIVE_TUNING_SYNTH_SONGS}
+    assert len(set(LIVE_DANCE_TUNING_SONGS)) == len(LIVE_DANCE_TUNING_SONGS) == 8
+    assert set(LIVE_DANCE_TUNING_SONGS) <= tuning
+
+    # Which songs are taken, without rendering them: stand-ins named after the tuning songs.
+    def stand_in(name: str) -> LiveSong:
+        return LiveSong(name, "tuning", np.zeros(4), np.zeros(1), np.zeros(1))
+
+    half = len(tuning) // 2
+    names = sorted(tuning)
+    monkeypatch.setattr(
+        bench_live, "_beat_songs", lambda *a, **k: [stand_in(n) for n in names[:half]]
+    )
+    monkeypatch.setattr(
+        bench_live, "live_tuning_songs", lambda *a, **k: [stand_in(n) for n in names[half:]]
+    )
+    songs = live_dance_songs(("tuning",), SR_HZ)
+    assert [s.name for s in songs] == list(LIVE_DANCE_TUNING_SONGS)
+    assert live_dance_songs(("random",), SR_HZ) == []  # only live-case sets and tuning

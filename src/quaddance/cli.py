@@ -748,7 +748,8 @@ def bench_live_cmd(
         str,
         typer.Option(
             help="Sets, comma-separated: random, untuned, live, heldout (tuning too); the "
-            "whole loop runs on the live-case sets among them (live, heldout)."
+            "whole loop runs on the live-case sets among them (live, heldout) and, with "
+            "tuning, on 8 tuning songs."
         ),
     ] = "random,untuned,live,heldout",
     random: Annotated[
@@ -759,7 +760,7 @@ def bench_live_cmd(
         typer.Option(
             "--dance/--tracker-only",
             help="Also run `live --from-file` in real time on the live-case songs (about "
-            "4 min for live and heldout).",
+            "8 min for live and heldout; 5 min for the tuning songs).",
         ),
     ] = True,
 ) -> None:

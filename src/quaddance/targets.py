@@ -463,11 +463,17 @@ def _window_min(x: np.ndarray, width: int) -> np.ndarray:
 
 
 def _rate_limit(
-    x: np.ndarray, low: np.ndarray, high: np.ndarray, dt: float, v_max: float, a_max: float
+    x: np.ndarray,
+    low: np.ndarray,
+    high: np.ndarray,
+    dt: float,
+    v_max: float,
+    a_max: float,
+    vel0: float = 0.0,
 ) -> np.ndarray:
     """One causal pass: follow ``x`` (T,) inside [low, high] with |velocity| <= v_max and
     |acceleration| <= a_max (finite differences at ``dt``), feeding the target's own
-    velocity forward.
+    velocity forward; it starts at ``x[0]`` moving at ``vel0``.
 
     A target that keeps the bounds is reproduced exactly. Elsewhere the output closes the
     gap as fast as the bounds allow and brakes in time, both for the target (velocity towards
@@ -482,7 +488,7 @@ def _rate_limit(
     high_l = _window_min(high, ahead).tolist()
     low_l = (-_window_min(-low, ahead)).tolist()
     xs = x.tolist()
-    pos, vel = xs[0], 0.0
+    pos, vel = xs[0], float(vel0)
     y[0] = pos
     dv = a_max * dt
     for k in range(1, n):
@@ -512,6 +518,34 @@ def _bounded_smooth(
     fwd = _rate_limit(x, low, high, dt, v_max, a_max)
     bwd = _rate_limit(x[::-1], low[::-1], high[::-1], dt, v_max, a_max)[::-1]
     return 0.5 * (fwd + bwd)
+
+
+def continue_body_targets(
+    body: np.ndarray,
+    sent: np.ndarray,
+    dt: float,
+    four_feet: BodyLimits = BODY_LIMITS_FOUR_FEET,
+    paw_up: BodyLimits = BODY_LIMITS_PAW_UP,
+) -> np.ndarray:
+    """(T, 4) body targets that carry on from ``sent`` (the last two rows already final,
+    (2, 4)), at steps of ``dt``: each column follows ``body`` from the position and
+    velocity that ``sent`` ends with, within the speed and acceleration bounds of
+    `feasible_body_targets` and the four-feet range (the causal pass of its filter). Where
+    ``body`` keeps the bounds from there, it comes out unchanged; where it would jump (a new
+    plan meeting an old one), it is caught up with as fast as the bounds allow."""
+    body = np.asarray(body, dtype=np.float64)
+    sent = np.asarray(sent, dtype=np.float64)
+    v_max = np.minimum(four_feet.max_speed, paw_up.max_speed)
+    a_max = np.minimum(four_feet.max_accel, paw_up.max_accel)
+    out = np.empty_like(body)
+    for c in range(4):
+        x = np.concatenate([sent[-1:, c], body[:, c]])
+        low = np.full(x.size, four_feet.low[c])
+        high = np.full(x.size, four_feet.high[c])
+        vel0 = (sent[-1, c] - sent[-2, c]) / dt
+        y = _rate_limit(x, low, high, dt, float(v_max[c]), float(a_max[c]), vel0)
+        out[:, c] = y[1:]
+    return out
 
 
 def paw_clamp_report(

@@ -291,6 +291,34 @@ def heldout_songs(sr: int, cache_dir: Path = Path("benchmarks/cache")) -> list[L
     return out
 
 
+LIVE_DANCE_TUNING_SONGS = (
+    "tune_140_to_116",
+    "tune_92_sync_break_110_swing",
+    "tune_r6000_random04_ballad",
+    "tune_rock_152",
+    "pop_100_to_128",
+    "piano_72_arpeggio",
+    "tune_skank_118",
+    "dembow_96_sync",
+)
+"""Tuning-set songs that the whole loop also runs on when ``tuning`` is among the sets: the
+live choreographer is tuned on these, never on the live-case sets. Two live-case songs (a
+break, a tempo change) and six of other styles at 72-152 BPM (~5 min of real time)."""
+
+
+def live_dance_songs(
+    sets: tuple[str, ...], sr: int, cache_dir: Path = Path("benchmarks/cache")
+) -> list[LiveSong]:
+    """The songs `bench_live_dance` runs on: those of the live-case sets among ``sets`` and,
+    with ``tuning``, `LIVE_DANCE_TUNING_SONGS`."""
+    songs = live_case_songs(sets, sr, cache_dir)
+    if "tuning" in sets:
+        tuning = _beat_songs(("tuning",), sr, 0, cache_dir) + live_tuning_songs(sr, cache_dir)
+        by_name = {s.name: s for s in tuning}
+        songs += [by_name[name] for name in LIVE_DANCE_TUNING_SONGS]
+    return songs
+
+
 def live_case_songs(
     sets: tuple[str, ...], sr: int, cache_dir: Path = Path("benchmarks/cache")
 ) -> list[LiveSong]:
@@ -485,9 +513,9 @@ def bench_live_dance(
     cache_dir: Path = Path("benchmarks/cache"),
 ) -> dict[str, Any]:
     """Run `quaddance live --from-file` (simulated robot, wall clock, shipped policy) on the
-    songs of the live-case ``sets``, whose beats are known exactly, and score the whole loop
-    per song: the
-    lock, falls, the loop time, the audio-to-command latency, and the robot's motion accents
+    songs of `live_dance_songs` (the live-case ``sets``; `LIVE_DANCE_TUNING_SONGS` with
+    ``tuning``), whose beats are known exactly, and score the whole loop per song: the lock,
+    falls, the loop time, the audio-to-command latency, and the robot's motion accents
     (measured in the simulator: paw lift peaks and trunk turning points, `choreo.accents`)
     against the true beats after the lock (+-100 ms) with their median offset."""
     import soundfile as sf
@@ -496,9 +524,9 @@ def bench_live_dance(
     from quaddance.live.session import LiveJob, run_live
     from quaddance.music.online_beats import SR_HZ
 
-    chosen = tuple(s for s in sets if s in LIVE_CASE_SETS)
+    chosen = tuple(s for s in sets if s in (*LIVE_CASE_SETS, "tuning"))
     songs = [
-        s for s in live_case_songs(chosen, SR_HZ, cache_dir) if names is None or s.name in names
+        s for s in live_dance_songs(chosen, SR_HZ, cache_dir) if names is None or s.name in names
     ]
     rows = []
     for song in songs:

@@ -24,7 +24,12 @@ import numpy as np
 from quaddance.choreo.body import choreograph_body, plan_body
 from quaddance.choreo.choreographer import choreograph, min_jerk
 from quaddance.choreo.grid import MusicGrid
-from quaddance.targets import TargetConfig, feasible_body_targets, robot_targets
+from quaddance.targets import (
+    TargetConfig,
+    continue_body_targets,
+    feasible_body_targets,
+    robot_targets,
+)
 
 #: While dancing, committed targets reach at least this far (and a bar more) past the song's
 #: "now", s: the policy's preview (0.4 s) plus the audio-to-command latency (45 ms), with
@@ -189,7 +194,8 @@ class LiveChoreographer:
         """Put ``new`` rows at ``start``. Over an earlier plan's tail the paws take the
         higher target; the trunk cross-fades from the old plan (or, past its end, from the
         last final pose held) to the new one over ``fade_steps``, with a minimum-jerk weight
-        so that position, velocity and acceleration stay continuous at both ends."""
+        so that position, velocity and acceleration stay continuous at both ends, and within
+        the trunk's speed and acceleration bounds (`targets.continue_body_targets`)."""
         have = self.rows.shape[0]
         new = new.copy()
         n_tail = max(0, min(have - start, new.shape[0]))
@@ -202,6 +208,11 @@ class LiveChoreographer:
             old[:n_old] = self.rows[start : start + n_old, 4:]
             w = min_jerk(np.arange(1, n_fade + 1) / (n_fade + 1))[:, None]
             new[:n_fade, 4:] = (1 - w) * old + w * new[:n_fade, 4:]
+        if start >= 2:
+            # The trunk keeps the offline targets' speed and acceleration bounds across the
+            # seam, and when a lost lock sends it back to the calm pose.
+            sent = self.rows[start - 2 : start, 4:]
+            new[:, 4:] = continue_body_targets(new[:, 4:], sent, 1.0 / self.hz)
         self.rows = np.concatenate([self.rows[:start], new], axis=0)
         _one_paw_at_a_time(self.rows, start, round(self.cfg.min_ground_s * self.hz))
 
