@@ -267,7 +267,8 @@ def test_sim_deploy_of_a_song_dances_through_lag_with_a_soft_start_in_torque_lim
     assert summary["rear_lift_mean_m"] < 0.01
     assert summary["sim"]["physics_dt_s"] == 0.001 and summary["sim"]["pd_hz"] >= 500
     # `done` stands on the policy: the trunk stays near level until damping lets it down
-    # (a PD move to the nominal joints tilted it 0.14-0.9 rad under this lag; now <= 0.16).
+    # (a PD move to the nominal joints tilted it 0.14-0.9 rad under this lag; a 0.4 s fade of
+    # the targets up to 0.26 rad, which failed CI once; the 0.8 s fade 0.07-0.18 in 12 runs).
     standing = (log["state"] == STATES.index("done")) & (log["kp"] > 0)
     assert standing.sum() >= 50 and log["tilt_true_rad"][standing].max() < 0.25
     # The lag reached the runner (states 50 ms older after 15 s) and the dance went on.
