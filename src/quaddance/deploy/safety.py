@@ -62,8 +62,8 @@ class SafetyCfg:
     #: stands so for `done_stand_s` in all (without a dance: the nominal pose is held). A PD
     #: move to the nominal joints instead tilted the trunk 0.14-0.33 rad and tipped it over in
     #: 1 of 24 runs under +50 ms lag: the feet stay where the dance left them, not where the
-    #: nominal joints would put them. A 0.4 s fade still tilted it up to 0.26 rad right after
-    #: the switch under +50 ms lag (21 runs); over 0.8 s, 0.07-0.18 rad (12 runs).
+    #: nominal joints would put them. A 0.4 s fade still tilted it 0.05-0.26 rad right after
+    #: the switch under +50 ms lag (29 runs and a CI run); over 0.8 s, 0.07-0.18 rad (12 runs).
     done_fade_s: float = 0.8
     done_stand_s: float = 2.0
     done_damp_s: float = 1.0  #: then damping before the runner exits
