@@ -500,9 +500,9 @@ def _accent_stats(accents_s: np.ndarray, beats_s: np.ndarray, tol_s: float) -> t
 
     offsets = accent_offsets_s(accents_s, beats_s)
     hit = offsets <= tol_s
-    if not hit.any():
-        return (0.0 if offsets.size == 0 else float(hit.mean())), float("nan")
-    return float(hit.mean()), float(np.median(offsets[hit]) * 1e3)
+    coverage = float(hit.mean()) if hit.size else 0.0
+    median_ms = float(np.median(offsets[hit]) * 1e3) if hit.any() else float("nan")
+    return coverage, median_ms
 
 
 def bench_live_dance(
