@@ -24,6 +24,7 @@ from quaddance.music.online_beats import (
     LATENCY_S,
     SILENCE_RESET_S,
     SR_HZ,
+    SWING_BEATS,
     BeatEvent,
     OnlineBeatTracker,
 )
@@ -347,6 +348,33 @@ def test_tracker_keeps_the_beat_when_loud_off_beat_hats_come_in() -> None:
     assert len(errors) >= round((ref[-1] - hats_from_s - 2.0) * bpm / 60.0) - 1
     assert errors.max() <= HIT_WINDOW_S
     assert all(locked for t, locked, _ in locks if hats_from_s <= t <= ref[-1])
+    assert tracker.state.tempo_bpm == pytest.approx(bpm, rel=0.02)
+
+
+def test_tracker_moves_off_swung_off_beats_onto_the_beat() -> None:
+    """Swung hats alone (at 0.6 of each beat) for 8 s: the tracker locks on them, and the
+    phase hold keeps that grid once kicks come in on the beats, since the hats still support
+    it. The swing test (`analysis.swing_shift`, online) moves the grid onto the kicks within
+    `SWING_BEATS` beats; before it, the beats stayed on the hats to the end."""
+    bpm, kicks_from_s, swing_at = 110.0, 8.0, 0.6
+    period_s = 60.0 / bpm
+    clicks, ref = _click_track([(bpm, 24.0)])
+    y = np.where(np.arange(len(clicks)) >= kicks_from_s * SR_HZ, clicks, 0.0).astype(np.float32)
+    rng = np.random.default_rng(0)
+    t = np.arange(round(0.08 * SR_HZ)) / SR_HZ
+    hat = 0.6 * np.diff(rng.standard_normal(len(t)) * np.exp(-t / 0.03), prepend=0.0)
+    for beat_s in ref:
+        i = round((beat_s + swing_at * period_s) * SR_HZ)
+        y[i : i + len(hat)] += hat[: max(0, len(y) - i)].astype(np.float32)
+    events, locks, tracker = _track(y)
+    assert _first_lock_s(locks) <= 6.0
+    # Locked on the hats before the kicks come in (what the test is about).
+    hats = ref + swing_at * period_s
+    assert _errors_s(events, hats, 5.0, kicks_from_s).max() <= HIT_WINDOW_S
+    moved_by_s = kicks_from_s + (SWING_BEATS + 2) * period_s
+    errors = _errors_s(events, ref, moved_by_s, ref[-1])
+    assert len(errors) >= round((ref[-1] - moved_by_s) / period_s) - 1
+    assert errors.max() <= HIT_WINDOW_S
     assert tracker.state.tempo_bpm == pytest.approx(bpm, rel=0.02)
 
 

@@ -413,27 +413,41 @@ def _track_beats(onset: np.ndarray, period: np.ndarray, tightness: float) -> np.
     return np.array(beats[::-1])
 
 
-def _swing_shift(beat_frames: np.ndarray, onset: np.ndarray) -> float:
+SWING_FRACTIONS = np.linspace(0.0, 1.0, 41)[1:-1]
+"""Positions inside a beat (fractions of it) at which `swing_shift` reads the onset profile."""
+
+
+def beat_profile(beat_frames: np.ndarray, onset: np.ndarray) -> np.ndarray:
+    """(len(SWING_FRACTIONS),) mean onset at each fraction of the intervals between
+    ``beat_frames`` (frames of ``onset``, ascending, at least two)."""
+    starts, ends = beat_frames[:-1], beat_frames[1:]
+    pos = starts[:, None] + SWING_FRACTIONS[None, :] * (ends - starts)[:, None]
+    return np.interp(pos, np.arange(len(onset)), onset).mean(axis=0)
+
+
+def swing_shift(profile: np.ndarray) -> float:
     """Fraction of a beat to move the beats by when they sit on swung off-beats, else 0.
 
     Swing delays the off-beat (to 0.55-0.7 of the beat); it never anticipates it. So when the
-    strongest onset inside the tracked beats comes early (before 0.47 of the beat) and its
-    mirror position is empty, the tracker has locked onto the swung off-beats and the true
-    beats lie that fraction later.
+    strongest onset inside the tracked beats (``profile``, from `beat_profile`) comes early
+    (before 0.47 of the beat) and its mirror position is empty, the tracker has locked onto the
+    swung off-beats and the true beats lie that fraction later. Shared by the offline analyser
+    and the online tracker.
     """
-    if len(beat_frames) < 8:
-        return 0.0
-    fractions = np.linspace(0.0, 1.0, 41)[1:-1]
-    starts, ends = beat_frames[:-1], beat_frames[1:]
-    pos = starts[:, None] + fractions[None, :] * (ends - starts)[:, None]
-    profile = np.interp(pos, np.arange(len(onset)), onset).mean(axis=0)
-    middle = (fractions > 0.25) & (fractions < 0.75)
+    middle = (SWING_FRACTIONS > 0.25) & (SWING_FRACTIONS < 0.75)
     i = int(np.argmax(np.where(middle, profile, -np.inf)))
-    f = fractions[i]
-    mirror = float(np.interp(1.0 - f, fractions, profile))
+    f = SWING_FRACTIONS[i]
+    mirror = float(np.interp(1.0 - f, SWING_FRACTIONS, profile))
     if f < 0.47 and profile[i] > 2.0 * mirror:
         return float(f)
     return 0.0
+
+
+def _swing_shift(beat_frames: np.ndarray, onset: np.ndarray) -> float:
+    """`swing_shift` over the whole song's beats (0 for fewer than 8 beats)."""
+    if len(beat_frames) < 8:
+        return 0.0
+    return swing_shift(beat_profile(beat_frames, onset))
 
 
 def _chroma_change(chroma: np.ndarray, at: np.ndarray, half_width: np.ndarray) -> np.ndarray:

@@ -40,6 +40,10 @@ The tracker sees the audio block by block and never looks ahead. Per 11.6 ms fra
    (an offset from the score's beats) for as long as that grid stays supported; when it loses
    the lock, or the tempo changes, the reported beats follow the score again. A held grid
    follows its own onsets: each supported beat moves the next ones onto its onset peak.
+   Swing: the held grid can be the swung off-beats themselves (swung hats heard before the
+   drums, or chosen after a tempo change), which stay supported. Every ``SWING_BEATS`` beats
+   the onsets are folded over the reported grid, and the offline analyser's swing test
+   (``analysis.swing_shift``, stricter here) moves the grid onto the beat.
 6. Downbeats (4/4): the bar position whose beats carry the most kick/bass-band onsets over
    the last bars, with hysteresis.
 7. Energy: RMS mapped to [0, 1] by the 5th and 95th percentiles of the last 30 s (the offline
@@ -52,7 +56,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from quaddance.music.analysis import AnalysisConfig, backbeat_heard
+from quaddance.music.analysis import (
+    SWING_FRACTIONS,
+    AnalysisConfig,
+    backbeat_heard,
+    beat_profile,
+    swing_shift,
+)
 from quaddance.music.audio import DEFAULT_SR
 
 SR_HZ = DEFAULT_SR
@@ -168,6 +178,20 @@ reported grid is a jump to another pulse, which the reported beats do not follow
 quarter beat: well beyond the drift of a steady or ramping tempo (BTrack's TIGHTNESS weight
 of an interval 25 % off a period is exp(-0.5 (5 ln 0.75)^2) = 0.36, of one 4 % off 0.98), and
 no more than the half beat to an off-beat or the third of a beat to a swung one."""
+
+SWING_BEATS = 6
+"""While locked, the onsets of the last this many beat intervals are folded over the reported
+grid, and the grid moves onto the beat when it sits on swung off-beats (item 5; the offline
+analyser's `swing_shift`, on 8 beats as there); then as many new beats before the next test."""
+SWING_SHIFT_RANGE = (0.3, 0.42)
+"""Shifts (fractions of a beat) the online swing test makes: off-beats swung to 0.58-0.7."""
+SWING_NEAR = 0.1
+"""Profile positions within this fraction of a beat of the grid, or of the shift, belong to
+them."""
+SWING_GRID_MIN = 0.3
+SWING_REST_MAX = 0.3
+"""The grid's own onsets are at least, and any onsets away from the grid and the shift at
+most, this fraction of the profile's peak."""
 
 SILENCE_DB = -50.0
 """Frames quieter than this, dB relative to the running loudness peak, are silence."""
@@ -488,6 +512,7 @@ class OnlineBeatTracker:
         self._locked = False
         self._doubled = False  # the backbeat test doubled the filter's tempo (item 2)
         self._misses = 0
+        self._swing_tested = 0  # len(self._support) when the swing test last moved the grid
         self._last_beat_s = float("nan")
         self._heard_frames = 0
 
@@ -760,6 +785,46 @@ class OnlineBeatTracker:
             self._period_at_beats.append(self._period)
             self._beat_frames.append(frame)
             self._update_lock(supported, onset, i)
+            if self._locked:
+                self._swing_guard(onset)
+
+    def _swing_guard(self, onset: np.ndarray) -> None:
+        """Move the reported grid onto the beat when the last `SWING_BEATS` intervals show it
+        on swung off-beats (`analysis.swing_shift`): the shift is added to the offset, and the
+        next beat is not held back onto the old grid."""
+        n = SWING_BEATS + 1
+        if len(self._support) - self._swing_tested < n:
+            return
+        frames = np.asarray(self._beat_frames[-n:]) - self._hist_start - 1
+        if (
+            frames[0] < 0
+            or max(self._period_at_beats[-n:]) / min(self._period_at_beats[-n:])
+            > STEADY_TEMPO_RATIO
+        ):
+            return
+        profile = beat_profile(frames, onset)
+        shift = swing_shift(profile)
+        # Stricter than offline, where the beats sit on their onsets: the reported grid may lie
+        # a frame or two off them, which moves a straight off-beat to 0.45 or leaves the
+        # beat's own onset tail above 0.25, and a grid at a wrong tempo folds its onsets
+        # anywhere. So only a clear swing moves the grid: a late eighth at 0.58-0.7 of the beat
+        # seen from the off-beat (a shift of 0.3-0.42), the profile's peak, the grid on onsets
+        # of its own (the swung eighths), and nothing else of note in the beat.
+        peak = float(profile.max())
+        k = int(np.argmin(np.abs(SWING_FRACTIONS - shift)))
+        near_grid = np.abs(SWING_FRACTIONS - np.round(SWING_FRACTIONS)) <= SWING_NEAR
+        rest = ~near_grid & (np.abs(SWING_FRACTIONS - shift) > SWING_NEAR)
+        if not (
+            SWING_SHIFT_RANGE[0] <= shift <= SWING_SHIFT_RANGE[1]
+            and profile[k] == peak
+            and profile[near_grid].max() >= SWING_GRID_MIN * peak
+            and profile[rest].max() <= SWING_REST_MAX * peak
+        ):
+            return
+        if shift > 0.0:
+            self._beat_offset += shift
+            self._phase_free = True  # the next beat is on the new grid, one period + shift on
+            self._swing_tested = len(self._support)
 
     def _count_bar(self) -> None:
         """Downbeat evidence for beats heard up to one period after them: the kick/bass onset
