@@ -28,7 +28,9 @@ The tracker sees the audio block by block and never looks ahead. Per 11.6 ms fra
    current grid carried back over as many beats of the music already heard lands on onsets as
    often, the last ``LOCK_RETRO_BEATS`` reported beats were supported, the tempo stayed steady
    since the first of them (this saves the wait for beats that were heard before the first
-   tempo estimate or before the tempo settled). Either way the tempo's periodicity must stand
+   tempo estimate or before the tempo settled); the heard grid also passes when its last two
+   bars were supported on the same two or more beats of the bar, not every other one (a clave
+   leaves beats 2 and 3 empty: ``LOCK_BAR_BEATS``). Either way the tempo's periodicity must stand
    out of white noise's (``LOCK_PERIODICITY``). It unlocks after
    ``UNLOCK_MISSES`` unsupported beats in a row or when the music stops (``SILENCE_RESET_S`` of
    silence also resets the tempo and phase, so a restart is found afresh); beats predicted
@@ -140,6 +142,8 @@ LOCK_MIN_WINDOW_BEATS = 4
 LOCK_SUPPORT = 0.75
 """Fraction of the beats (at least the last ``LOCK_MIN_WINDOW_BEATS``) that must be supported
 for a lock."""
+LOCK_BAR_BEATS = 2
+"""Supported beats per bar that the retrospective lock's bar test needs (item 4)."""
 SUPPORT_RATIO = 1.4
 """A beat is supported when its onset peak is this many times the period's mean onset."""
 LOCK_RETRO_BEATS = 2
@@ -867,15 +871,36 @@ class OnlineBeatTracker:
         need = max(LOCK_BEATS, 1 + int(np.ceil(LOCK_SPAN_S / (self._period * FRAME_S) - 1e-9)))
         return max(need, LOCK_MIN_WINDOW_BEATS)
 
-    def _grid_heard(self, onset: np.ndarray, i: int, need: int) -> bool:
-        """Whether the music already heard supports the current beat grid: the ``need`` grid
-        beats at the current period that end at history frame ``i`` (a reported, supported
-        beat), most of them (``LOCK_SUPPORT``) supported as reported beats are."""
-        grid = [round(i - k * self._period) for k in range(need)]
+    def _grid_heard(self, onset: np.ndarray, i: int, n: int) -> list[bool] | None:
+        """Whether each of the ``n`` beats of the current grid that end at history frame ``i``
+        (a reported, supported beat), carried back over the music already heard, is supported
+        as a reported beat would be (oldest first); None where the grid reaches back before
+        the music (or the silence) began."""
+        grid = [round(i - k * self._period) for k in range(n - 1, -1, -1)]
         scored = [self._support_at(onset, g) for g in grid]
-        if any(s is None for s in scored) or grid[-1] - round(self._period) < 0:
-            return False  # the grid reaches back before the music (or the silence) began
-        return float(np.mean([s[0] for s in scored if s is not None])) >= LOCK_SUPPORT
+        if grid[0] - round(self._period) < 0 or any(s is None for s in scored):
+            return None
+        return [s[0] for s in scored if s is not None]
+
+    def _heard_grid_fits(self, onset: np.ndarray, i: int, need: int, reported: bool) -> bool:
+        """The retrospective lock's test of the heard grid (`_grid_heard`): with the last
+        ``LOCK_RETRO_BEATS`` reported beats supported (``reported``), most of its last
+        ``need`` beats supported (``LOCK_SUPPORT``); or, whatever the beat before, its last
+        two bars supported on the same beats of the bar, at least ``LOCK_BAR_BEATS`` of each:
+        a clave or a two-hit figure marks the same beats every bar and leaves the others
+        empty, so two supported beats in a row come once a bar (every other beat does not
+        count)."""
+        bar = BEATS_PER_BAR
+        if reported:
+            heard = self._grid_heard(onset, i, need)
+            if heard is not None and np.mean(heard) >= LOCK_SUPPORT:
+                return True
+        bars = self._grid_heard(onset, i, 2 * bar)
+        if bars is None or bars[:bar] != bars[bar:] or sum(bars[bar:]) < LOCK_BAR_BEATS:
+            return False
+        # Every other beat supported is no bar figure: the grid runs at twice the rate of its
+        # supported beats (a 4:3 tempo error on eighth-note hats does this), not at the beat.
+        return bars[bar:] not in ([True, False] * (bar // 2), [False, True] * (bar // 2))
 
     def _steady_since(self, frame: int) -> bool:
         """Whether every tempo estimate in force since frame number ``frame`` stayed within
@@ -905,9 +930,8 @@ class OnlineBeatTracker:
             # estimate of a moment, and the score's phase has settled).
             retro = (
                 len(recent) >= LOCK_RETRO_BEATS
-                and all(recent[-LOCK_RETRO_BEATS:])
                 and self._steady_since(self._beat_frames[-LOCK_RETRO_BEATS])
-                and self._grid_heard(onset, i, need)
+                and self._heard_grid_fits(onset, i, need, all(recent[-LOCK_RETRO_BEATS:]))
             )
             periodic = self._periodicity >= LOCK_PERIODICITY
             if (forward or retro) and recent[-1] and periodic:
