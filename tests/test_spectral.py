@@ -72,14 +72,16 @@ def test_db_peak_normalisation_and_rms_equal_librosa_s() -> None:
 @pytest.mark.parametrize("shape", [*spectral.SHIPPED, (16000, 512, 40)])
 def test_filterbanks_are_librosa_s(shape: tuple[int, int, int]) -> None:
     """The shipped banks (and one computed on demand) are exactly librosa's; after a librosa
-    upgrade that changes them, run scripts/make_filterbanks.py."""
+    upgrade that changes them, run scripts/make_filterbanks.py. The mel band centres (float64,
+    from exp and log) may differ in the last bit on another CPU, whose vectorised exp/log
+    numpy picks at run time (3 of 96 did, by 2e-16 relative, on a fresh machine)."""
     sr, n_fft, n_mels = shape
     banks = spectral.filterbanks(sr, n_fft, n_mels)
     np.testing.assert_array_equal(
         banks.mel, librosa.filters.mel(sr=sr, n_fft=n_fft, n_mels=n_mels, fmax=sr / 2)
     )
-    np.testing.assert_array_equal(
-        banks.mel_hz, librosa.mel_frequencies(n_mels=n_mels + 2, fmax=sr / 2)[1:-1]
+    np.testing.assert_allclose(
+        banks.mel_hz, librosa.mel_frequencies(n_mels=n_mels + 2, fmax=sr / 2)[1:-1], rtol=1e-14
     )
     np.testing.assert_array_equal(
         banks.chroma, librosa.filters.chroma(sr=sr, n_fft=n_fft, tuning=0.0)
@@ -93,7 +95,11 @@ def test_write_filterbanks_writes_what_is_shipped(tmp_path) -> None:
     with np.load(path) as new, np.load(spectral._shipped_path()) as shipped:
         assert sorted(new.files) == sorted(shipped.files)
         for name in new.files:
-            np.testing.assert_array_equal(new[name], shipped[name])
+            assert new[name].dtype == shipped[name].dtype
+            if new[name].dtype == np.float64:  # band centres: the last bit is the CPU's
+                np.testing.assert_allclose(new[name], shipped[name], rtol=1e-14)
+            else:
+                np.testing.assert_array_equal(new[name], shipped[name])
 
 
 def test_analysing_a_song_does_not_import_librosa(tmp_path) -> None:
