@@ -499,6 +499,28 @@ def test_bench_live_sets_are_what_their_names_say(tmp_path: Path) -> None:
     assert not out.exists()
 
 
+def test_bench_live_joins_songs_mid_song_between_beats() -> None:
+    """`bench live` also scores each song joined a third in, 0.37 of a beat after a beat: the
+    tracker hears neither the song's start (every bench song starts on its first downbeat)
+    nor a beat first. The joined song's times count from the join."""
+    from quaddance.bench.live import JOIN_PHASE_BEATS, LiveSong, join_mid_song
+
+    sr = 1000
+    beats = np.arange(0.5, 29.0, 0.5)  # 120 BPM for 30 s, a 2 s break at 14-16 s
+    beats = beats[(beats < 14.0) | (beats >= 16.0)]
+    song = LiveSong(
+        "s", "live", np.arange(30 * sr, dtype=np.float32), beats, beats[::4], (0.0, 16.0)
+    )
+    joined, join_s = join_mid_song(song, sr)
+    k = int(np.searchsorted(beats, 10.0))  # the first beat a third (10 s) in
+    assert join_s == pytest.approx(beats[k] + JOIN_PHASE_BEATS * 0.5)
+    assert joined.y[0] == round(join_s * sr) and len(joined.y) == 30 * sr - round(join_s * sr)
+    np.testing.assert_allclose(joined.beats_s, beats[beats > join_s] - join_s)
+    np.testing.assert_allclose(joined.downbeats_s, beats[::4][beats[::4] > join_s] - join_s)
+    assert joined.music_starts_s == pytest.approx((0.0, 16.0 - join_s))
+    assert np.min(np.abs(beats - join_s)) > 0.3 * 0.5  # not on a beat
+
+
 def test_bench_live_tuning_additions_are_new_songs() -> None:
     """The songs `bench live` adds to its tuning set are other songs than those of the sets it
     reports (no name, and no tempo + rhythms + seed, shared with the untuned or random sets),

@@ -765,8 +765,9 @@ def bench_live_cmd(
     ] = True,
 ) -> None:
     """Online beat tracking vs the offline analyser (lock time, F-measure) on songs with exact
-    beats not tuned on; then the whole live loop on the simulated robot: falls, loop time,
-    latency, the robot's motion accents on the true beats. Writes JSON."""
+    beats not tuned on, heard from their start and joined mid-song; then the whole live loop on
+    the simulated robot: falls, loop time, latency, the robot's motion accents on the true
+    beats. Writes JSON."""
     import tempfile
 
     from rich.console import Console
@@ -785,7 +786,9 @@ def bench_live_cmd(
     for name, m in results["tracker"]["means"].items():
         console.print(
             f"{name}: {m['n_locked']}/{m['n_songs']} locked, median lock {m['lock_s_median']} s,"
-            f" F online {m['f_online']:.3f} vs offline {m['f_offline']:.3f}"
+            f" F online {m['f_online']:.3f} vs offline {m['f_offline']:.3f}; joined mid-song:"
+            f" median lock {m['join_lock_s_median']} s, F online {m['join_f_online']:.3f} vs"
+            f" offline {m['join_f_offline']:.3f}"
         )
     if dance:
         with tempfile.TemporaryDirectory(prefix="quaddance-bench-live-") as tmp:
