@@ -186,7 +186,8 @@ no more than the half beat to an off-beat or the third of a beat to a swung one.
 SWING_BEATS = 6
 """While locked, the onsets of the last this many beat intervals are folded over the reported
 grid, and the grid moves onto the beat when it sits on swung off-beats (item 5; the offline
-analyser's `swing_shift`, on 8 beats as there); then as many new beats before the next test."""
+analyser's `swing_shift`, which wants 8 beats of a whole song: 6 here moved the one tuning
+song it moves 2 beats sooner, and no other); then as many new beats before the next test."""
 SWING_SHIFT_RANGE = (0.3, 0.42)
 """Shifts (fractions of a beat) the online swing test makes: off-beats swung to 0.58-0.7."""
 SWING_NEAR = 0.1
@@ -825,10 +826,9 @@ class OnlineBeatTracker:
             and profile[rest].max() <= SWING_REST_MAX * peak
         ):
             return
-        if shift > 0.0:
-            self._beat_offset += shift
-            self._phase_free = True  # the next beat is on the new grid, one period + shift on
-            self._swing_tested = len(self._support)
+        self._beat_offset += shift
+        self._phase_free = True  # the next beat is on the new grid, one period + shift on
+        self._swing_tested = len(self._support)
 
     def _count_bar(self) -> None:
         """Downbeat evidence for beats heard up to one period after them: the kick/bass onset
@@ -925,9 +925,10 @@ class OnlineBeatTracker:
             # needs MIN_TEMPO_WINDOW_S, and 4 beats at 60 BPM take 4 s), but the music heard
             # before them is in the history: when the current grid, carried back over the
             # lock's window, lands on onsets there as it would on reported beats, the grid
-            # has been supported for as long, only not reported. The last LOCK_RETRO_BEATS
-            # reported beats must be supported at a steady tempo (the tempo is not an
-            # estimate of a moment, and the score's phase has settled).
+            # has been supported for as long, only not reported. The tempo must have been
+            # steady since the last LOCK_RETRO_BEATS reported beats (it is not an estimate of
+            # a moment), and those beats supported (the score's phase has settled), unless the
+            # heard grid shows a bar figure (`_heard_grid_fits`).
             retro = (
                 len(recent) >= LOCK_RETRO_BEATS
                 and self._steady_since(self._beat_frames[-LOCK_RETRO_BEATS])
