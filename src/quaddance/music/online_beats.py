@@ -305,6 +305,11 @@ def _autocorrelation(x: np.ndarray, max_lag: int, demean: bool = True) -> np.nda
     return ac / max(float(ac[0]), 1e-12)
 
 
+def _steady(periods: list[float]) -> bool:
+    """Whether the beat ``periods`` (a non-empty list) stay within ``STEADY_TEMPO_RATIO``."""
+    return max(periods) / max(min(periods), 1e-9) <= STEADY_TEMPO_RATIO
+
+
 class _Ema:
     """Exponential moving average with a time constant in frames."""
 
@@ -801,11 +806,7 @@ class OnlineBeatTracker:
         if len(self._support) - self._swing_tested < n:
             return
         frames = np.asarray(self._beat_frames[-n:]) - self._hist_start - 1
-        if (
-            frames[0] < 0
-            or max(self._period_at_beats[-n:]) / min(self._period_at_beats[-n:])
-            > STEADY_TEMPO_RATIO
-        ):
+        if frames[0] < 0 or not _steady(self._period_at_beats[-n:]):
             return
         profile = beat_profile(frames, onset)
         shift = swing_shift(profile)
@@ -909,14 +910,14 @@ class OnlineBeatTracker:
         after = [p for f, p in self._tempo_track if f > frame]
         before = [p for f, p in self._tempo_track if f <= frame][-1:]
         periods = before + after
-        return bool(periods) and max(periods) / min(periods) <= STEADY_TEMPO_RATIO
+        return bool(periods) and _steady(periods)
 
     def _update_lock(self, supported: bool, onset: np.ndarray, i: int) -> None:
         self._misses = 0 if supported else self._misses + 1
         need = self._lock_need()
         recent = self._support[-need:]
         periods = self._period_at_beats[-need:]
-        steady = max(periods) / max(min(periods), 1e-9) <= STEADY_TEMPO_RATIO
+        steady = _steady(periods)
         if not self._locked:
             # Most, not all, beats must be supported: some styles leave one beat of the bar
             # empty (beat 3 of a clave pattern).
