@@ -10,7 +10,7 @@ import threading
 import time
 import types
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pytest
@@ -28,6 +28,9 @@ from quaddance.music.online_beats import (
     BeatEvent,
     OnlineBeatTracker,
 )
+
+if TYPE_CHECKING:
+    from quaddance.bench.live import LiveSong
 
 HIT_WINDOW_S = 0.07
 """Beats count as right within +-70 ms (the F-measure window)."""
@@ -378,27 +381,51 @@ def test_tracker_moves_off_swung_off_beats_onto_the_beat() -> None:
     assert tracker.state.tempo_bpm == pytest.approx(bpm, rel=0.02)
 
 
+def _tuning_midi_song(name: str, tmp_path: Path) -> LiveSong:
+    """The tuning song ``name`` (beat benchmark or live tuning addition), rendered with
+    fluidsynth; the test is skipped without it."""
+    import shutil
+
+    from quaddance.bench.beats import BENCH_SONGS, _cached_midi_song, find_soundfont
+    from quaddance.bench.live import _live_song, live_tuning_midi_specs
+
+    if shutil.which("fluidsynth") is None:
+        pytest.skip("needs fluidsynth (scripts/setup.sh installs it)")
+    spec = next(s for s in (*BENCH_SONGS, *live_tuning_midi_specs()) if s.name == name)
+    song, _ = _cached_midi_song(spec, "tuning", find_soundfont(), SR_HZ, tmp_path)
+    return _live_song(song)
+
+
+def _assert_locks_and_tracks(song: LiveSong, bpm: float) -> None:
+    """Locked within 6 s, then at least 95 % of the beats on the song's beats."""
+    events, locks, tracker = _track(song.y)
+    lock_s = _first_lock_s(locks)
+    assert lock_s <= 6.0
+    errors = _errors_s(events, song.beats_s, lock_s, song.beats_s[-1])
+    assert len(errors) >= round((song.beats_s[-1] - lock_s) * bpm / 60.0) - 2
+    assert np.mean(errors <= HIT_WINDOW_S) >= 0.95
+    assert tracker.state.tempo_bpm == pytest.approx(bpm, rel=0.02)
+
+
 def test_tracker_locks_on_a_clave_that_leaves_two_beats_of_the_bar_empty(tmp_path: Path) -> None:
     """The tuning song tune_clave_138: claves 3-3-4-2, chords on 1 and the "and" of 2,
     tresillo bass. Only beats 1 and 4 of each bar carry onsets, so the lock's support (3 of 4
     beats) never came, although the beats were right; the retrospective lock's bar test
     (two bars supported on the same two adjacent beats) locks it within 6 s."""
-    import shutil
+    _assert_locks_and_tracks(_tuning_midi_song("tune_clave_138", tmp_path), 138.0)
 
-    from quaddance.bench.beats import _cached_midi_song, find_soundfont
-    from quaddance.bench.live import live_tuning_midi_specs
 
-    if shutil.which("fluidsynth") is None:
-        pytest.skip("needs fluidsynth (scripts/setup.sh installs it)")
-    spec = next(s for s in live_tuning_midi_specs() if s.name == "tune_clave_138")
-    song, _ = _cached_midi_song(spec, "tuning", find_soundfont(), SR_HZ, tmp_path)
-    events, locks, tracker = _track(song.y)
-    lock_s = _first_lock_s(locks)
-    assert lock_s <= 6.0
-    errors = _errors_s(events, song.beats_s, lock_s, song.beats_s[-1])
-    assert len(errors) >= round((song.beats_s[-1] - lock_s) * 138.0 / 60.0) - 2
-    assert np.mean(errors <= HIT_WINDOW_S) >= 0.95
-    assert tracker.state.tempo_bpm == pytest.approx(138.0, rel=0.02)
+def test_tracker_joining_a_song_on_its_skank_moves_onto_the_beat_by_the_lock(
+    tmp_path: Path,
+) -> None:
+    """The tuning song skank_132_sync joined mid-song, as `bench live` does (0.37 of a beat
+    after a beat): its loudest pulse is the skank chords on the off-beats, and the tracker
+    locked on them and kept them to the end. The bass line changes pitch on the beats, and the
+    off-beat test on the heard grid (`analysis.offbeat_harmony`) moves the grid at the lock."""
+    from quaddance.bench.live import join_mid_song
+
+    joined, _ = join_mid_song(_tuning_midi_song("skank_132_sync", tmp_path), SR_HZ)
+    _assert_locks_and_tracks(joined, 132.0)
 
 
 def test_tracker_loses_lock_in_silence_and_finds_the_music_again() -> None:

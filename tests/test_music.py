@@ -26,7 +26,13 @@ from quaddance.bench.beats import (
 )
 from quaddance.cli import app
 from quaddance.errors import InputFileError, QuaddanceError
-from quaddance.music.analysis import Analysis, analyze, analyze_file
+from quaddance.music.analysis import (
+    Analysis,
+    AnalysisConfig,
+    analyze,
+    analyze_file,
+    offbeat_harmony,
+)
 from quaddance.music.audio import load_audio
 from quaddance.music.synth import DEMO_TEMPO_BPM, render_song
 
@@ -170,6 +176,21 @@ def test_keys_on_the_off_beats_do_not_pull_the_beats(tmp_path: Path) -> None:
     result = analyze(y, SR)
     assert result.extra["offbeat_shift"]
     assert beat_f_measure(beats_s, result.beats_s) >= 0.9
+
+
+def test_offbeat_harmony_says_where_the_bass_changes_pitch() -> None:
+    # A bass line that moves to another note every 20 frames: beats on its changes are on the
+    # beat; beats half-way between them, on the off-beats; a bass that never moves tells nothing.
+    n_frames, step = 400, 20
+    chroma = np.zeros((12, n_frames))
+    for k in range(0, n_frames, step):
+        chroma[(5 * k // step) % 12, k : k + step] = 1.0
+    beats = np.arange(step, n_frames - step, step)
+    cfg = AnalysisConfig()
+    assert not offbeat_harmony(chroma, beats, cfg)
+    assert offbeat_harmony(chroma, beats + step // 2, cfg)
+    assert offbeat_harmony(chroma, beats[:8] + step // 2, cfg)  # 7 intervals, the online minimum
+    assert not offbeat_harmony(np.ones((12, n_frames)), beats + step // 2, cfg)
 
 
 def test_silence_has_no_beats() -> None:

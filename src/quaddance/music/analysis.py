@@ -450,8 +450,14 @@ def _swing_shift(beat_frames: np.ndarray, onset: np.ndarray) -> float:
     return swing_shift(beat_profile(beat_frames, onset))
 
 
+SILENT_CHROMA_RATIO = 1e-4
+"""`_chroma_change` counts no change where the mean chroma on either side has less than this
+fraction of the loudest side's norm (-40 dB of chroma power)."""
+
+
 def _chroma_change(chroma: np.ndarray, at: np.ndarray, half_width: np.ndarray) -> np.ndarray:
-    """(m,) cosine distance between the mean chroma just before and just after each frame.
+    """(m,) cosine distance between the mean chroma just before and just after each frame
+    (0 where either side is silent in the chroma's band, `SILENT_CHROMA_RATIO`).
 
     Args:
         chroma: (12, n) chroma frames.
@@ -465,24 +471,34 @@ def _chroma_change(chroma: np.ndarray, at: np.ndarray, half_width: np.ndarray) -
     hi = np.clip(np.round(at + half_width).astype(int), mid + 1, n)
     before = (cum[:, mid] - cum[:, lo]) / (mid - lo)
     after = (cum[:, hi] - cum[:, mid]) / (hi - mid)
-    norms = np.linalg.norm(before, axis=0) * np.linalg.norm(after, axis=0)
-    return 1.0 - np.sum(before * after, axis=0) / (norms + 1e-12)
+    norm_before, norm_after = np.linalg.norm(before, axis=0), np.linalg.norm(after, axis=0)
+    cosine = np.sum(before * after, axis=0) / np.maximum(norm_before * norm_after, 1e-30)
+    # A side without sound in the band (the digital silence between clicks) has no pitch to
+    # change: the cosine of a near-empty chroma is noise (of an empty one, a change of 1).
+    loudest = max(float(norm_before.max(initial=0.0)), float(norm_after.max(initial=0.0)))
+    heard = np.minimum(norm_before, norm_after) > SILENT_CHROMA_RATIO * loudest
+    return np.where(heard, 1.0 - cosine, 0.0)
 
 
-def _offbeat_harmony(beat_frames: np.ndarray, feats: _Features, cfg: AnalysisConfig) -> bool:
+def offbeat_harmony(bass_chroma: np.ndarray, beat_frames: np.ndarray, cfg: AnalysisConfig) -> bool:
     """True when the beats sit on the off-beats: the bass line changes pitch at the midpoints
-    between them far more often than at them.
+    between them far more often than at them (``cfg.offbeat_harmony_ratio``).
 
     Bass notes change with the harmony, and harmony changes on the beat (mostly on beat 1);
-    drums or keys that hit the off-beats (offbeat hats, skanks, pushes) can pull the tracker
-    half a beat off, but they do not move where the chords change.
+    drums or keys that hit the off-beats (offbeat hats, skanks, pushes) can pull a tracker
+    half a beat off, but they do not move where the chords change. Shared by this analyser
+    and the online tracker (`music.online_beats`).
+
+    Args:
+        bass_chroma: (12, n) chroma of the bass band (as ``_Features.bass_chroma``).
+        beat_frames: (m,) ascending beat frames of ``bass_chroma``, at least two; a change is
+            measured at each beat but the last and at each midpoint, over half a beat on
+            either side.
     """
-    if len(beat_frames) < 8:
-        return False
     starts = beat_frames[:-1].astype(float)
     half = 0.5 * np.diff(beat_frames)
-    on = _chroma_change(feats.bass_chroma, starts, half).mean()
-    mid = _chroma_change(feats.bass_chroma, starts + half, half).mean()
+    on = _chroma_change(bass_chroma, starts, half).mean()
+    mid = _chroma_change(bass_chroma, starts + half, half).mean()
     return bool(mid > cfg.offbeat_harmony_ratio * on and mid > 0.05)
 
 
@@ -645,7 +661,8 @@ def analyze(y: np.ndarray, sr: int, cfg: AnalysisConfig | None = None) -> Analys
         intervals = np.diff(beat_frames, append=2 * beat_frames[-1] - beat_frames[-2])
         beat_frames = np.round(beat_frames + shift * intervals).astype(int)
         beat_frames = beat_frames[beat_frames < len(feats.beat_onset)]
-    offbeat_shift = _offbeat_harmony(beat_frames, feats, cfg)
+    # Fewer than 8 beats are too few to tell where the harmony changes.
+    offbeat_shift = len(beat_frames) >= 8 and offbeat_harmony(feats.bass_chroma, beat_frames, cfg)
     if offbeat_shift:
         intervals = np.diff(beat_frames, append=2 * beat_frames[-1] - beat_frames[-2])
         beat_frames = np.round(beat_frames + 0.5 * intervals).astype(int)

@@ -46,6 +46,13 @@ The tracker sees the audio block by block and never looks ahead. Per 11.6 ms fra
    drums, or chosen after a tempo change), which stay supported. Every ``SWING_BEATS`` beats
    the onsets are folded over the reported grid, and the offline analyser's swing test
    (``analysis.swing_shift``, stricter here) moves the grid onto the beat.
+   Off-beats: a grid held on straight off-beats (hats, skanks or stabs between the beats, which
+   the score can prefer, most often when the tracker starts listening in the middle of a song)
+   is found by the offline analyser's bass-harmony test (``analysis.offbeat_harmony``): at every
+   beat while locked, the grid carried back over the music heard so far is tested, and when
+   the bass line changes pitch at its midpoints rather than at its beats, twice in a row, the
+   grid moves half a beat. At the lock both tests also run on the heard grid (there, once is
+   enough), so that a lock reached on the off-beats is moved before its beats are danced to.
 6. Downbeats (4/4): the bar position whose beats carry the most kick/bass-band onsets over
    the last bars, with hysteresis.
 7. Energy: RMS mapped to [0, 1] by the 5th and 95th percentiles of the last 30 s (the offline
@@ -55,6 +62,7 @@ The tracker sees the audio block by block and never looks ahead. Per 11.6 ms fra
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -63,6 +71,7 @@ from quaddance.music.analysis import (
     AnalysisConfig,
     backbeat_heard,
     beat_profile,
+    offbeat_harmony,
     swing_shift,
 )
 from quaddance.music.audio import DEFAULT_SR
@@ -86,6 +95,12 @@ LATENCY_S = 0.025
 """A beat is reported at most this long after it happens, for blocks of at most this length
 (the default block is 11.6 ms): beats are predicted half a beat ahead and reported by the first
 ``update`` whose block ends at or after the predicted time."""
+
+BASS_N_FFT = 2048
+"""Window of the bass chroma (the off-beat test's), samples: the offline analyser's, 10.8 Hz
+bins (the 21.5 Hz bins of ``N_FFT`` blur neighbouring bass notes: on the tuning set the test
+then moved more songs off the beat). Its frames end at the newest sample, as the onset frames
+do."""
 
 WINDOW_DELAY_S = (N_FFT / 2) / SR_HZ
 """An onset shows in the flux when it reaches the middle of the window: onset frame times are
@@ -169,11 +184,12 @@ BACKBEAT_PERIODS = 4
 BACKBEAT_MIN_PERIODS = 3
 """Beat periods of the recent music that the backbeat test (item 2) folds together: the last
 4, at least 3 (2 let the first second's noise through: a 60 BPM click track doubled)."""
-BACKBEAT_CFG = AnalysisConfig()
-"""The backbeat test's settings, the offline analyser's (`analysis.backbeat_heard`): the tempo
-doubles when the midpoints between the beats carry hits about as strong as the beats and
-clearly stronger than the quarter-beat positions (a snare backbeat heard at half tempo), while
-the doubled tempo stays at most ``BACKBEAT_CFG.max_doubled_bpm``."""
+ANALYSER_CFG = AnalysisConfig()
+"""The settings of the backbeat and off-beat tests, the offline analyser's. The backbeat test
+(`analysis.backbeat_heard`): the tempo doubles when the midpoints between the beats carry hits
+about as strong as the beats and clearly stronger than the quarter-beat positions (a snare
+backbeat heard at half tempo), while the doubled tempo stays at most
+``ANALYSER_CFG.max_doubled_bpm``."""
 STEADY_TEMPO_RATIO = 1.04
 """Tempo counts as steady when it stays within this ratio over the lock's beats."""
 PHASE_JUMP_BEATS = 0.25
@@ -197,6 +213,23 @@ SWING_GRID_MIN = 0.3
 SWING_REST_MAX = 0.3
 """The grid's own onsets are at least, and any onsets away from the grid and the shift at
 most, this fraction of the profile's peak."""
+SWING_LOCK_MIN_BEATS = 4
+"""At the lock the swing test runs on the grid carried back over the music heard, at most
+``SWING_BEATS`` and at least this many beat intervals of it."""
+
+OFFBEAT_MIN_BEATS = 7
+OFFBEAT_MAX_BEATS = 16
+"""The off-beat test (item 5) runs on the grid carried back over the last this many beat
+intervals heard (8 s of history hold 16 at 120 BPM), at least ``OFFBEAT_MIN_BEATS`` (the
+offline analyser's minimum, 8 beats: over fewer, one bar's bass line decides)."""
+OFFBEAT_VOTES = 2
+"""Beats in a row at which the off-beat test must say so before the grid moves: tested at every
+beat, on windows that differ by one beat, a grid whose bass changes about as often at its
+midpoints as at its beats passes the test's ratio now and then (with one vote, two tuning songs
+joined mid-song went off the beat: a tempo ramp, F 0.77 -> 0.00, and a random dnb song,
+0.71 -> 0.15; with two, neither did)."""
+OFFBEAT_REST_BEATS = 4
+"""Beats after a move of the grid before the off-beat test runs again."""
 
 SILENCE_DB = -50.0
 """Frames quieter than this, dB relative to the running loudness peak, are silence."""
@@ -326,8 +359,19 @@ class _Ema:
         return self.value
 
 
+class _Frame(NamedTuple):
+    """What `_Features` computes per onset frame."""
+
+    tempo_onset: float
+    beat_onset: float
+    low_onset: float
+    rms: float
+    mel_db: np.ndarray  # (N_MELS,)
+    bass_chroma: np.ndarray  # (12,) power of the bass band per pitch class
+
+
 class _Features:
-    """Causal framing, mel spectrum and the two normalised onset envelopes."""
+    """Causal framing, mel spectrum, bass chroma and the two normalised onset envelopes."""
 
     def __init__(self) -> None:
         from quaddance.music.spectral import filterbanks
@@ -340,7 +384,13 @@ class _Features:
         self.low = mel_hz <= LOW_BAND_HZ
         self.high = mel_hz >= HIGH_BAND_HZ
         self.chord_bands = (mel_hz >= CHORD_BAND_HZ[0]) & (mel_hz <= CHORD_BAND_HZ[1])
-        self.tail = np.zeros(N_FFT - HOP, dtype=np.float32)
+        # The bass chroma as the offline analyser's, from a longer window (`BASS_N_FFT`).
+        wide = filterbanks(SR_HZ, BASS_N_FFT, ANALYSER_CFG.n_mels)
+        bass = (wide.freqs_hz >= 30.0) & (wide.freqs_hz <= ANALYSER_CFG.bass_chroma_max_hz)
+        self.bass_bins = np.flatnonzero(bass)
+        self.bass_chroma_t = np.ascontiguousarray(wide.chroma[:, bass].T, dtype=np.float64)
+        self.bass_window = np.hanning(BASS_N_FFT + 1)[:-1]
+        self.tail = np.zeros(BASS_N_FFT - HOP, dtype=np.float32)
         self.pending = np.zeros(0, dtype=np.float32)
         self.ref_power = 0.0
         self.prev_db: np.ndarray | None = None
@@ -353,9 +403,8 @@ class _Features:
         # 80 dB onset range, while one loud hit does not deafen the tracker for long.
         self.ref_decay = 10 ** (-0.6 * FRAME_S / 10.0)
 
-    def push(self, samples: np.ndarray) -> list[tuple[float, float, float, float, np.ndarray]]:
-        """Add samples; return (tempo_onset, beat_onset, low_onset, rms, mel dB (N_MELS,)) for
-        each new frame."""
+    def push(self, samples: np.ndarray) -> list[_Frame]:
+        """Add samples; return the features of each new frame."""
         self.pending = np.concatenate([self.pending, samples])
         n_frames = len(self.pending) // HOP
         if n_frames == 0:
@@ -363,15 +412,19 @@ class _Features:
         used = n_frames * HOP
         audio = np.concatenate([self.tail, self.pending[:used]])
         self.pending = self.pending[used:]
-        self.tail = audio[-(N_FFT - HOP) :]
-        idx = np.arange(n_frames)[:, None] * HOP + np.arange(N_FFT)[None, :]
-        frames = audio[idx].astype(np.float64)
+        self.tail = audio[-(BASS_N_FFT - HOP) :]
+        idx = np.arange(n_frames)[:, None] * HOP + np.arange(BASS_N_FFT)[None, :]
+        wide = audio[idx].astype(np.float64)
+        frames = wide[:, BASS_N_FFT - N_FFT :]  # the onset windows end at the same sample
         rms = np.sqrt(np.mean(frames**2, axis=1))
         power = np.abs(np.fft.rfft(frames * self.window, axis=1)) ** 2
         mel = power @ self.mel_fb_t  # (n_frames, n_mels)
+        bass_spec = np.fft.rfft(wide * self.bass_window, axis=1)[:, self.bass_bins]
+        bass_chroma = (np.abs(bass_spec) ** 2) @ self.bass_chroma_t  # (n_frames, 12)
         out = []
         for i in range(n_frames):
-            out.append((*self._onsets(mel[i]), float(rms[i]), self.prev_db))
+            tempo, beat, low = self._onsets(mel[i])
+            out.append(_Frame(tempo, beat, low, float(rms[i]), self.prev_db, bass_chroma[i]))
         return out
 
     def _onsets(self, mel: np.ndarray) -> tuple[float, float, float]:
@@ -456,10 +509,10 @@ class OnlineBeatTracker:
         new = self._feats.push(block)
         # Samples short of a whole frame wait in ``pending``: the newest frame ends before them.
         frames_end_s = t_end_s - len(self._feats.pending) / SR_HZ
-        for k, (tempo_o, beat_o, low_o, rms, mel_db) in enumerate(new):
+        for k, frame in enumerate(new):
             # Onsets show when they reach the window centre: frame time = centre time.
             frame_t = frames_end_s - (len(new) - 1 - k) * FRAME_S - WINDOW_DELAY_S
-            self._frame(tempo_o, beat_o, low_o, rms, mel_db, frame_t)
+            self._frame(frame, frame_t)
         events = []
         while self._scheduled and self._scheduled[0] <= t_end_s:
             # Counted even when not reported, so that the bar position stays on the grid.
@@ -498,6 +551,7 @@ class OnlineBeatTracker:
         self._onset_b: list[float] = []  # beat onset history, aligned with _cum
         self._low: list[float] = []
         self._mel: list[np.ndarray] = []  # mel spectrum per frame, dB
+        self._bass: list[np.ndarray] = []  # bass chroma per frame
         self._pending_bar: list[int] = []  # frames of reported beats not yet in the bar count
         self._beats_counted = 0
         self._mean_low = _Ema(2 * BEATS_PER_BAR)  # per-beat means that scale the two cues
@@ -523,22 +577,17 @@ class OnlineBeatTracker:
         self._doubled = False  # the backbeat test doubled the filter's tempo (item 2)
         self._misses = 0
         self._swing_tested = 0  # len(self._support) when the swing test last moved the grid
+        self._offbeat_next = 0  # len(self._support) from which the off-beat test runs again
+        self._offbeat_votes = 0  # beats in a row at which the off-beat test said so
+        self._lock_beat = 0  # len(self._support) at the lock
         self._last_beat_s = float("nan")
         self._heard_frames = 0
 
-    def _frame(
-        self,
-        tempo_o: float,
-        beat_o: float,
-        low_o: float,
-        rms: float,
-        mel_db: np.ndarray,
-        t_s: float,
-    ) -> None:
+    def _frame(self, frame: _Frame, t_s: float) -> None:
         self._n_frames += 1
-        self._update_energy(rms)
+        self._update_energy(frame.rms)
         reset_frames = round(SILENCE_RESET_S * self._fps)
-        if self._is_silent(rms):
+        if self._is_silent(frame.rms):
             self._silent_frames += 1
             if self._silent_frames == reset_frames:
                 self._reset_tracking()
@@ -548,7 +597,7 @@ class OnlineBeatTracker:
         else:
             self._silent_frames = 0
         self._heard_frames += 1
-        self._push_history(tempo_o, beat_o, low_o, mel_db)
+        self._push_history(frame)
         if self._heard_frames % self._tempo_hop == 0:
             self._update_tempo()
         if self._period <= 0:
@@ -575,22 +624,21 @@ class OnlineBeatTracker:
         lo, hi = self._rms_range
         self._energy(float(np.clip((rms - lo) / max(hi - lo, 1e-9), 0.0, 1.0)))
 
-    def _push_history(
-        self, tempo_o: float, beat_o: float, low_o: float, mel_db: np.ndarray
-    ) -> None:
+    def _push_history(self, frame: _Frame) -> None:
         p = self._period
-        cum = (1.0 - CUMSCORE_ALPHA) * beat_o
+        cum = (1.0 - CUMSCORE_ALPHA) * frame.beat_onset
         if p > 0 and len(self._cum) > p / 2:
             prev = np.asarray(self._cum[-(round(2 * p) + 1) :])  # only the window is needed
             cum += CUMSCORE_ALPHA * self._best_past(prev, len(prev))
-        self._onset_t.append(tempo_o)
-        self._onset_b.append(beat_o)
-        self._low.append(low_o)
-        self._mel.append(mel_db)
+        self._onset_t.append(frame.tempo_onset)
+        self._onset_b.append(frame.beat_onset)
+        self._low.append(frame.low_onset)
+        self._mel.append(frame.mel_db)
+        self._bass.append(frame.bass_chroma)
         self._cum.append(cum)
         excess = len(self._cum) - self._hist_len
         if excess > 0:
-            for h in (self._onset_t, self._onset_b, self._low, self._mel, self._cum):
+            for h in (self._onset_t, self._onset_b, self._low, self._mel, self._bass, self._cum):
                 del h[:excess]
             self._hist_start += excess
 
@@ -693,10 +741,10 @@ class OnlineBeatTracker:
 
     def _backbeat_double(self, period: float) -> bool:
         """Whether the music heard so far, folded over ``period`` (frames), shows a snare
-        backbeat heard at half tempo (see `BACKBEAT_CFG`): the onsets are averaged at 16
+        backbeat heard at half tempo (see `ANALYSER_CFG`): the onsets are averaged at 16
         phases of the period over its last `BACKBEAT_PERIODS` (fewer right after a restart,
         at least `BACKBEAT_MIN_PERIODS`); the strongest phase stands for the beat."""
-        if 60.0 * self._fps / period * 2.0 > BACKBEAT_CFG.max_doubled_bpm:
+        if 60.0 * self._fps / period * 2.0 > ANALYSER_CFG.max_doubled_bpm:
             return False
         onset = np.asarray(self._onset_b)
         n = min(BACKBEAT_PERIODS, int((len(onset) - 2) // period))
@@ -708,7 +756,7 @@ class OnlineBeatTracker:
         pos = start + period * (np.arange(n)[:, None] + np.arange(16)[None, :] / 16.0)
         profile = np.interp(pos, np.arange(len(hit)), hit).mean(axis=0)
         k = int(np.argmax(profile))
-        return backbeat_heard(profile[(k + np.array([0, 4, 8, 12])) % 16], BACKBEAT_CFG)
+        return backbeat_heard(profile[(k + np.array([0, 4, 8, 12])) % 16], ANALYSER_CFG)
 
     def _rebuild_cumscore(self) -> None:
         """Recompute the cumulative beat score over the history with the new period: scores
@@ -794,20 +842,45 @@ class OnlineBeatTracker:
             self._support.append(supported)
             self._period_at_beats.append(self._period)
             self._beat_frames.append(frame)
+            was_locked = self._locked
             self._update_lock(supported, onset, i)
-            if self._locked:
+            if self._locked and not was_locked:
+                # The lock's grid has few reported beats, but the music before them was
+                # heard: both tests run on the grid carried back over it, and move it at once.
+                self._lock_beat = len(self._support)
+                self._offbeat_next = 0
+                self._swing_at_lock(onset, i)
+                self._offbeat_guard(i, votes=1)
+            elif self._locked:
                 self._swing_guard(onset)
+                self._offbeat_guard(i, votes=OFFBEAT_VOTES)
+
+    def _grid_frames(self, i: int, n: int) -> np.ndarray:
+        """History frames of the last ``n`` beats of the current grid that ends at history
+        frame ``i``, carried back at the current period (oldest first; may be negative)."""
+        return np.array([round(i - k * self._period) for k in range(n - 1, -1, -1)])
+
+    def _swing_at_lock(self, onset: np.ndarray, i: int) -> None:
+        """The swing test (`_swing_test`) on the heard grid that ends at history frame ``i``:
+        up to `SWING_BEATS` intervals of it, at least `SWING_LOCK_MIN_BEATS`."""
+        n = min(SWING_BEATS, int(i // self._period))
+        if n >= SWING_LOCK_MIN_BEATS:
+            self._swing_test(onset, self._grid_frames(i, n + 1))
 
     def _swing_guard(self, onset: np.ndarray) -> None:
-        """Move the reported grid onto the beat when the last `SWING_BEATS` intervals show it
-        on swung off-beats (`analysis.swing_shift`): the shift is added to the offset, and the
-        next beat is not held back onto the old grid."""
+        """The swing test (`_swing_test`) on the last `SWING_BEATS` intervals of reported beats,
+        as many new beats after the last move of the grid."""
         n = SWING_BEATS + 1
         if len(self._support) - self._swing_tested < n:
             return
         frames = np.asarray(self._beat_frames[-n:]) - self._hist_start - 1
         if frames[0] < 0 or not _steady(self._period_at_beats[-n:]):
             return
+        self._swing_test(onset, frames)
+
+    def _swing_test(self, onset: np.ndarray, frames: np.ndarray) -> None:
+        """Move the reported grid onto the beat when the onsets folded over the beats at history
+        ``frames`` show it on swung off-beats (`analysis.swing_shift`)."""
         profile = beat_profile(frames, onset)
         shift = swing_shift(profile)
         # Stricter than offline, where the beats sit on their onsets: the reported grid may lie
@@ -827,9 +900,50 @@ class OnlineBeatTracker:
             and profile[rest].max() <= SWING_REST_MAX * peak
         ):
             return
-        self._beat_offset += shift
-        self._phase_free = True  # the next beat is on the new grid, one period + shift on
+        self._shift_grid(shift)
         self._swing_tested = len(self._support)
+
+    def _offbeat_guard(self, i: int, votes: int) -> None:
+        """Move the reported grid half a beat when the off-beat test (`analysis.offbeat_harmony`)
+        on the grid that ends at history frame ``i``, carried back over the music heard (at
+        most `OFFBEAT_MAX_BEATS` intervals, at least `OFFBEAT_MIN_BEATS`), has said so at
+        ``votes`` beats in a row."""
+        if len(self._support) < self._offbeat_next:
+            return
+        period = self._period
+        # A whole period before the first beat is heard too: its change is measured from there.
+        n = min(OFFBEAT_MAX_BEATS, int((i - period) // period))
+        if n < OFFBEAT_MIN_BEATS:
+            return
+        # The tempo stayed steady over the reported beats since the lock, and the beats of the
+        # lock before it (earlier estimates may be the settling filter's): the grid carried
+        # back at the current period is the music's.
+        m = min(n, len(self._support) - self._lock_beat + LOCK_RETRO_BEATS)
+        if not _steady(self._period_at_beats[-m:]):
+            return
+        if not offbeat_harmony(np.asarray(self._bass).T, self._grid_frames(i, n + 1), ANALYSER_CFG):
+            self._offbeat_votes = 0
+            return
+        self._offbeat_votes += 1
+        if self._offbeat_votes >= votes:
+            self._offbeat_votes = 0
+            self._shift_grid(0.5)
+            self._offbeat_next = len(self._support) + OFFBEAT_REST_BEATS + 1
+
+    def _shift_grid(self, beats: float) -> None:
+        """Move the reported grid ``beats`` later, the beats already predicted on it too; the
+        next beat is not held back onto the old grid (`_hold_phase`)."""
+        self._beat_offset += beats
+        self._phase_free = True
+        frames = beats * self._period
+        self._scheduled = [t + frames * FRAME_S for t in self._scheduled]
+        # Only beats still to come move: the frames already scored stay as they were.
+        self._pending_support = [
+            f + round(frames) if f > self._n_frames else f for f in self._pending_support
+        ]
+        self._pending_bar = [
+            f + round(frames) if f > self._n_frames else f for f in self._pending_bar
+        ]
 
     def _count_bar(self) -> None:
         """Downbeat evidence for beats heard up to one period after them: the kick/bass onset
@@ -877,7 +991,7 @@ class OnlineBeatTracker:
         (a reported, supported beat), carried back over the music already heard, is supported
         as a reported beat would be (oldest first); None where the grid reaches back before
         the music (or the silence) began."""
-        grid = [round(i - k * self._period) for k in range(n - 1, -1, -1)]
+        grid = [int(g) for g in self._grid_frames(i, n)]
         scored = [self._support_at(onset, g) for g in grid]
         if grid[0] - round(self._period) < 0 or any(s is None for s in scored):
             return None
