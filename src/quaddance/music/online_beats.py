@@ -98,9 +98,10 @@ LATENCY_S = 0.025
 
 BASS_N_FFT = 2048
 """Window of the bass chroma (the off-beat test's), samples: the offline analyser's, 10.8 Hz
-bins (the 21.5 Hz bins of ``N_FFT`` blur neighbouring bass notes: on the tuning set the test
-then moved more songs off the beat). Its frames end at the newest sample, as the onset frames
-do."""
+bins. The 21.5 Hz bins of ``N_FFT`` blur neighbouring bass notes: with them the test moved
+tuning songs off the beat (`tune_skank_118` from the start F 0.99 -> 0.00; songs within 0.1 of
+the offline F 57 -> 55 of 67 from the start, 48 -> 46 joined mid-song). Its frames end at the
+newest sample, as the onset frames do."""
 
 WINDOW_DELAY_S = (N_FFT / 2) / SR_HZ
 """An onset shows in the flux when it reaches the middle of the window: onset frame times are
