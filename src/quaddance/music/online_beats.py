@@ -224,11 +224,11 @@ OFFBEAT_MAX_BEATS = 16
 intervals heard (8 s of history hold 16 at 120 BPM), at least ``OFFBEAT_MIN_BEATS`` (the
 offline analyser's minimum, 8 beats: over fewer, one bar's bass line decides)."""
 OFFBEAT_VOTES = 2
-"""Beats in a row at which the off-beat test must say so before the grid moves: tested at every
-beat, on windows that differ by one beat, a grid whose bass changes about as often at its
-midpoints as at its beats passes the test's ratio now and then (with one vote, two tuning songs
-joined mid-song went off the beat: a tempo ramp, F 0.77 -> 0.00, and a random dnb song,
-0.71 -> 0.15; with two, neither did)."""
+"""Runs of the off-beat test in a row (one per beat while locked, where it can run) that must
+say so before the grid moves: on windows that differ by one beat, a grid whose bass changes
+about as often at its midpoints as at its beats passes the test's ratio now and then (with one
+vote, two tuning songs joined mid-song went off the beat: a tempo ramp, F 0.77 -> 0.00, and a
+random dnb song, 0.71 -> 0.15; with two, neither did)."""
 OFFBEAT_REST_BEATS = 4
 """Beats after a move of the grid before the off-beat test runs again."""
 
@@ -907,8 +907,8 @@ class OnlineBeatTracker:
     def _offbeat_guard(self, i: int, votes: int) -> None:
         """Move the reported grid half a beat when the off-beat test (`analysis.offbeat_harmony`)
         on the grid that ends at history frame ``i``, carried back over the music heard (at
-        most `OFFBEAT_MAX_BEATS` intervals, at least `OFFBEAT_MIN_BEATS`), has said so at
-        ``votes`` beats in a row."""
+        most `OFFBEAT_MAX_BEATS` intervals, at least `OFFBEAT_MIN_BEATS`), has said so
+        ``votes`` runs in a row."""
         if len(self._support) < self._offbeat_next:
             return
         period = self._period
