@@ -491,11 +491,8 @@ class _Onsets:
         }
 
     def frame(self, spectrum: _Spectrum) -> _Frame:
-        tempo, beat, low = self._onsets(spectrum.mel)
-        assert self.prev_db is not None
-        return _Frame(tempo, beat, low, spectrum.rms, self.prev_db, spectrum.bass_chroma)
-
-    def _onsets(self, mel: np.ndarray) -> tuple[float, float, float]:
+        """The listener's frame: onset envelopes, mel dB and what the spectrum carries."""
+        mel = spectrum.mel
         self.ref_power = max(self.ref_power * REF_DECAY, float(mel.max()), 1e-10)
         db = 10.0 * np.log10(np.maximum(mel, self.ref_power * 1e-8) / self.ref_power)
         log = np.log1p(1e5 * mel / self.ref_power)
@@ -510,7 +507,7 @@ class _Onsets:
         tempo = self._normalise("t", full + low)
         beat_raw = full / max(self.mean_full(full), 1e-6) + high / max(self.mean_high(high), 1e-6)
         beat = self._normalise("b", beat_raw)
-        return tempo, beat, low
+        return _Frame(tempo, beat, low, spectrum.rms, db, spectrum.bass_chroma)
 
     def _normalise(self, key: str, x: float) -> float:
         """Remove the slow floor, divide by the local level (3 s); the floor on the divisor
