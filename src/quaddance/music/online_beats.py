@@ -1,7 +1,8 @@
 """Online (causal) beat, tempo, downbeat and energy tracking for ``quaddance live``.
 
 The tracker sees the audio block by block and never looks ahead. Per 11.6 ms frame (hop 256 at
-22.05 kHz) it computes, from a 46 ms window that ends at the newest sample:
+22.05 kHz) it computes, from a 46 ms window that ends at the newest sample (a 93 ms one for the
+bass chroma of item 5):
 
 1. Onset envelopes, as in the offline analyser (``music/analysis.py``) but with causal
    normalisation (running means instead of centred ones): mel dB flux plus kick/bass-band flux
