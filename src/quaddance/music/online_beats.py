@@ -395,10 +395,13 @@ class _Ema:
 
 
 class _Spectrum(NamedTuple):
-    """What `_Features` computes per onset frame."""
+    """What `_Features` computes per onset frame, the same for every listener."""
 
-    mel: np.ndarray  # (N_MELS,) mel power
+    full_flux: float  # mel dB flux, mean over the bands
+    low_flux: float  # ... over the kick/bass band
+    high_flux: float  # log1p flux, mean over the treble band
     rms: float
+    mel_db: np.ndarray  # (N_MELS,) mel spectrum, dB below the loudness reference
     bass_chroma: np.ndarray  # (12,) power of the bass band per pitch class
 
 
@@ -413,8 +416,15 @@ class _Frame(NamedTuple):
     bass_chroma: np.ndarray  # (12,) power of the bass band per pitch class
 
 
+REF_DECAY = 10 ** (-0.6 * FRAME_S / 10.0)
+"""Per-frame decay of the loudness references (onsets, silence): 6 dB per 10 s, so a song that
+gets quieter keeps its 80 dB onset range, while one loud hit does not deafen the tracker for
+long."""
+
+
 class _Features:
-    """Causal framing, mel spectrum, RMS and bass chroma (shared by the listeners)."""
+    """Causal framing, mel spectrum, its fluxes, RMS and bass chroma (shared by the
+    listeners)."""
 
     def __init__(self) -> None:
         from quaddance.music.spectral import filterbanks
@@ -435,6 +445,9 @@ class _Features:
         self.bass_window = np.hanning(BASS_N_FFT + 1)[:-1]
         self.tail = np.zeros(BASS_N_FFT - HOP, dtype=np.float32)
         self.pending = np.zeros(0, dtype=np.float32)
+        self.ref_power = 0.0
+        self.prev_db: np.ndarray | None = None
+        self.prev_log: np.ndarray | None = None
 
     def push(self, samples: np.ndarray) -> list[_Spectrum]:
         """Add samples; return the features of each new frame."""
@@ -454,31 +467,39 @@ class _Features:
         mel = power @ self.mel_fb_t  # (n_frames, n_mels)
         bass_spec = np.fft.rfft(wide * self.bass_window, axis=1)[:, self.bass_bins]
         bass_chroma = (np.abs(bass_spec) ** 2) @ self.bass_chroma_t  # (n_frames, 12)
-        return [_Spectrum(mel[i], float(rms[i]), bass_chroma[i]) for i in range(n_frames)]
+        return [self._spectrum(mel[i], float(rms[i]), bass_chroma[i]) for i in range(n_frames)]
 
-
-REF_DECAY = 10 ** (-0.6 * FRAME_S / 10.0)
-"""Per-frame decay of the loudness references (onsets, silence): 6 dB per 10 s, so a song that
-gets quieter keeps its 80 dB onset range, while one loud hit does not deafen the tracker for
-long."""
+    def _spectrum(self, mel: np.ndarray, rms: float, bass_chroma: np.ndarray) -> _Spectrum:
+        """One frame's fluxes against the previous frame, in dB below a decaying reference."""
+        self.ref_power = max(self.ref_power * REF_DECAY, float(mel.max()), 1e-10)
+        db = 10.0 * np.log10(np.maximum(mel, self.ref_power * 1e-8) / self.ref_power)
+        log = np.log1p(1e5 * mel / self.ref_power)
+        if self.prev_db is None or self.prev_log is None:
+            self.prev_db, self.prev_log = db, log
+        flux_db = np.maximum(0.0, db - self.prev_db)
+        flux_log = np.maximum(0.0, log - self.prev_log)
+        self.prev_db, self.prev_log = db, log
+        return _Spectrum(
+            float(flux_db.mean()),
+            float(flux_db[self.low].mean()),
+            float(flux_log[self.high].mean()),
+            rms,
+            db,
+            bass_chroma,
+        )
 
 
 class _Onsets:
-    """The two normalised onset envelopes of one listener, from the mel spectrum (causal
+    """The two normalised onset envelopes of one listener, from the shared fluxes (causal
     normalisation: running means instead of the offline analyser's centred ones).
 
     Args:
-        low, high: mel bands of the kick/bass band and of the treble.
         even_start: running means of the samples heard so far (`_Ema`'s ``even_start``), for
             the listener that joins music already playing; else they start at the first
             frame's zero flux, and the first second's onsets stand out (see `FALLBACK_S`).
     """
 
-    def __init__(self, low: np.ndarray, high: np.ndarray, even_start: bool) -> None:
-        self.low, self.high = low, high
-        self.ref_power = 0.0
-        self.prev_db: np.ndarray | None = None
-        self.prev_log: np.ndarray | None = None
+    def __init__(self, even_start: bool) -> None:
         fps = 1.0 / FRAME_S
         self.mean_full = _Ema(5.0 * fps, even_start)
         self.mean_high = _Ema(5.0 * fps, even_start)
@@ -492,23 +513,12 @@ class _Onsets:
         }
 
     def frame(self, spectrum: _Spectrum) -> _Frame:
-        """The listener's frame: onset envelopes, mel dB and what the spectrum carries."""
-        mel = spectrum.mel
-        self.ref_power = max(self.ref_power * REF_DECAY, float(mel.max()), 1e-10)
-        db = 10.0 * np.log10(np.maximum(mel, self.ref_power * 1e-8) / self.ref_power)
-        log = np.log1p(1e5 * mel / self.ref_power)
-        if self.prev_db is None or self.prev_log is None:
-            self.prev_db, self.prev_log = db, log
-        flux_db = np.maximum(0.0, db - self.prev_db)
-        flux_log = np.maximum(0.0, log - self.prev_log)
-        self.prev_db, self.prev_log = db, log
-        full = float(flux_db.mean())
-        low = float(flux_db[self.low].mean())
-        high = float(flux_log[self.high].mean())
+        """The listener's frame: its onset envelopes and what the spectrum carries."""
+        full, low, high = spectrum.full_flux, spectrum.low_flux, spectrum.high_flux
         tempo = self._normalise("t", full + low)
         beat_raw = full / max(self.mean_full(full), 1e-6) + high / max(self.mean_high(high), 1e-6)
         beat = self._normalise("b", beat_raw)
-        return _Frame(tempo, beat, low, spectrum.rms, db, spectrum.bass_chroma)
+        return _Frame(tempo, beat, low, spectrum.rms, spectrum.mel_db, spectrum.bass_chroma)
 
     def _normalise(self, key: str, x: float) -> float:
         """Remove the slow floor, divide by the local level (3 s); the floor on the divisor
@@ -578,7 +588,7 @@ class _Listener:
 
     def __init__(self, feats: _Features, even_start: bool) -> None:
         self._chord_bands = feats.chord_bands
-        self._onsets = _Onsets(feats.low, feats.high, even_start)
+        self._onsets = _Onsets(even_start)
         fps = 1.0 / FRAME_S
         self._fps = fps
         self._n_frames = 0  # frames processed since the start
