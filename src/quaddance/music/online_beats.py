@@ -73,7 +73,6 @@ bass chroma of item 5):
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -575,7 +574,7 @@ class OnlineBeatTracker:
     @property
     def state(self) -> TrackerState:
         """A snapshot of what the tracker believes now."""
-        return dataclasses.replace(self._followed.state, lock_s=self._lock_s)
+        return self._followed.state(self._lock_s)
 
 
 class _Listener:
@@ -609,7 +608,6 @@ class _Listener:
         self._rms_hist_every = max(1, round(0.1 * fps))
         self._energy = _Ema(ENERGY_SMOOTH_S * fps)
         self._peak_rms = 0.0
-        self._lock_s = float("nan")
         self._weights_period = 0.0  # period of the cached _best_past weights
         self._lags = np.zeros(0, dtype=int)
         self._weights = np.zeros(0)
@@ -645,9 +643,9 @@ class _Listener:
                 events.append(beat)
         return events
 
-    @property
-    def state(self) -> TrackerState:
-        """A snapshot of what the tracker believes now."""
+    def state(self, lock_s: float) -> TrackerState:
+        """A snapshot of what this listener believes now; ``lock_s`` is the tracker's first
+        lock (the listener followed may have changed since)."""
         period_s = self._period * FRAME_S if self._period > 0 else 0.0
         next_s = self._scheduled[0] if self._scheduled else float("nan")
         if not self._scheduled and period_s > 0 and np.isfinite(self._last_beat_s):
@@ -664,7 +662,7 @@ class _Listener:
             last_beat_s=self._last_beat_s,
             energy=float(self._energy.value),
             silent=self._silent_frames >= round(SILENCE_RESET_S * self._fps),
-            lock_s=self._lock_s,
+            lock_s=lock_s,
         )
 
     # --- per frame ---------------------------------------------------------------------------
@@ -1176,8 +1174,6 @@ class _Listener:
             periodic = self._periodicity >= LOCK_PERIODICITY
             if (forward or retro) and recent[-1] and periodic:
                 self._locked = True
-                if not np.isfinite(self._lock_s):
-                    self._lock_s = self._time_s
         elif self._misses >= UNLOCK_MISSES or (
             max(periods) / max(min(periods), 1e-9) > 1.25 and not all(recent[-2:])
         ):
