@@ -435,15 +435,11 @@ def test_tracker_joining_a_song_follows_the_listener_that_trusts_no_first_sound(
     for a downbeat (right from a song's start) has heard an off-beat first and locks only
     after 6 s. Once `FALLBACK_S` of music has passed, the tracker follows the other listener,
     whose running means start evenly and which is locked by then, on the song's beats."""
-    from quaddance.bench.beats import SYNTH_SONGS, BenchSong
+    from quaddance.bench.beats import SYNTH_SONGS, synth_song
     from quaddance.bench.live import _live_song, join_mid_song
-    from quaddance.music.synth import render_song
 
     spec = next(s for s in SYNTH_SONGS if s["name"] == "synth_84_swing")
-    kwargs = {k: v for k, v in spec.items() if k != "name"}
-    y, truth = render_song(duration_s=24.0, sr=SR_HZ, **kwargs)
-    song = BenchSong(spec["name"], "tuning", truth.tempo_bpm, y, truth.beats_s, spec)
-    joined, _ = join_mid_song(_live_song(song), SR_HZ)
+    joined, _ = join_mid_song(_live_song(synth_song(spec, SR_HZ)), SR_HZ)
     tracker = OnlineBeatTracker()
     first_locked: list[tuple[float, bool]] = []
     for block in ArraySource(joined.y, SR_HZ):

@@ -610,14 +610,11 @@ def _wav_at(song: BenchSong, soundfont: Path, sr: int, cache_dir: Path) -> Path:
     """A wav file of ``song`` rendered at ``sr`` (cached)."""
     import soundfile as sf
 
-    from quaddance.music.synth import render_song
-
     if isinstance(song.spec, MidiSongSpec):
         return _cached_midi_song(song.spec, song.set, soundfont, sr, cache_dir)[1]
     path = cache_dir.resolve() / f"{song.name}-synth-{sr}.wav"
     if not path.is_file():
-        kwargs = {k: v for k, v in song.spec.items() if k != "name"}
-        y, _ = render_song(duration_s=24.0, sr=sr, **kwargs)
+        y = synth_song(song.spec, sr).y
         path.parent.mkdir(parents=True, exist_ok=True)
         sf.write(str(path), y, sr, subtype="PCM_16")
     return path
@@ -630,8 +627,6 @@ def bench_songs(
     cache_dir: Path = Path("benchmarks/cache"),
 ) -> list[BenchSong]:
     """The benchmark songs of ``sets`` (see ``SETS``), rendered or taken from the cache."""
-    from quaddance.music.synth import render_song
-
     unknown = set(sets) - set(SETS)
     if unknown:
         raise QuaddanceError(f"unknown beat-bench set(s) {sorted(unknown)}; choose from {SETS}")
@@ -647,11 +642,17 @@ def bench_songs(
         specs += [(spec, "untuned") for spec in UNTUNED_SONGS]
     songs = [_cached_midi_song(spec, name, soundfont, sr, cache_dir)[0] for spec, name in specs]
     if "tuning" in sets:
-        for song in SYNTH_SONGS:
-            kwargs = {k: v for k, v in song.items() if k != "name"}
-            y, truth = render_song(duration_s=24.0, sr=sr, **kwargs)
-            songs.append(BenchSong(song["name"], "tuning", truth.tempo_bpm, y, truth.beats_s, song))
+        songs += [synth_song(spec, sr) for spec in SYNTH_SONGS]
     return songs
+
+
+def synth_song(spec: dict[str, Any], sr: int) -> BenchSong:
+    """The tuning song ``spec`` (one of `SYNTH_SONGS`), rendered by ``music.synth``."""
+    from quaddance.music.synth import render_song
+
+    kwargs = {k: v for k, v in spec.items() if k != "name"}
+    y, truth = render_song(duration_s=24.0, sr=sr, **kwargs)
+    return BenchSong(spec["name"], "tuning", truth.tempo_bpm, y, truth.beats_s, spec)
 
 
 def metrical_level_f_measure(
