@@ -226,6 +226,57 @@ def test_microphone_without_a_sound_card_is_one_line(tmp_path):
     assert "Traceback" not in proc.stderr
 
 
+@pytest.mark.parametrize("from_file", [True, False])
+def test_the_listener_tells_the_tracker_whether_music_may_already_be_playing(
+    monkeypatch, from_file
+):
+    """A file plays from the song's start; a microphone may join music already playing: the
+    tracker's ``song_start`` (which listener it trusts first, `music.online_beats`)."""
+    import queue
+    import threading
+
+    from quaddance.live import session
+    from quaddance.music import live as music_live
+    from quaddance.music import online_beats
+
+    told: list[bool] = []
+
+    class Tracker(online_beats.OnlineBeatTracker):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            told.append(self._first_trusted)
+
+    class Source:  # a tenth of a second of silence, from the file or the microphone
+        duration_s = 0.1
+
+        def __init__(self, *args, **kwargs):
+            pass
+
+        def __iter__(self):
+            return iter(music_live.ArraySource(np.zeros(2205, np.float32), 22050))
+
+    monkeypatch.setattr(online_beats, "OnlineBeatTracker", Tracker)
+    monkeypatch.setattr(music_live, "FileSource" if from_file else "MicSource", Source)
+    monkeypatch.setattr(session, "ignore_sigint", lambda: None)  # not in pytest's process
+    cfg = TargetConfig()
+    spec = {
+        "from_file": "song.wav" if from_file else None,
+        "device": None,
+        "policy_hz": HZ,
+        "target_cfg": {f: getattr(cfg, f) for f in cfg.__dataclass_fields__},
+        "seed": 0,
+        "style": "mixed",
+    }
+    out: queue.Queue = queue.Queue()
+    go = threading.Event()
+    go.set()
+    session._listen(spec, out, go, threading.Event())
+    messages = [out.get_nowait() for _ in range(out.qsize())]
+    assert messages[0][0] == "ready" and messages[-1] == ("end", None)
+    assert len(messages) > 3  # the blocks went through the tracker
+    assert told == [from_file]
+
+
 def test_live_with_viewer_and_video(song, tmp_path):
     """--viewer serves the page while dancing (on a free loopback port); --video with
     --from-file films the dance afterwards, with the song."""

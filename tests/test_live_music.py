@@ -64,9 +64,9 @@ def _click_track(
 
 
 def _track(
-    y: np.ndarray, block_s: float = BLOCK_S
+    y: np.ndarray, block_s: float = BLOCK_S, song_start: bool = True
 ) -> tuple[list[BeatEvent], list[tuple[float, bool, float]], OnlineBeatTracker]:
-    tracker = OnlineBeatTracker()
+    tracker = OnlineBeatTracker(song_start=song_start)
     events: list[BeatEvent] = []
     locks: list[tuple[float, bool, float]] = []  # (song time, locked, tempo BPM)
     for block in ArraySource(y, SR_HZ, block_s=block_s):
@@ -397,9 +397,9 @@ def _tuning_midi_song(name: str, tmp_path: Path) -> LiveSong:
     return _live_song(song)
 
 
-def _assert_locks_and_tracks(song: LiveSong, bpm: float) -> float:
+def _assert_locks_and_tracks(song: LiveSong, bpm: float, song_start: bool = True) -> float:
     """Locked within 6 s, then at least 95 % of the beats on the song's beats; the lock's time."""
-    events, locks, tracker = _track(song.y)
+    events, locks, tracker = _track(song.y, song_start=song_start)
     lock_s = _first_lock_s(locks)
     assert lock_s <= 6.0
     errors = _errors_s(events, song.beats_s, lock_s, song.beats_s[-1])
@@ -420,10 +420,11 @@ def test_tracker_locks_on_a_clave_that_leaves_two_beats_of_the_bar_empty(tmp_pat
 def test_tracker_joining_a_song_on_its_skank_moves_onto_the_beat_by_the_lock(
     tmp_path: Path,
 ) -> None:
-    """The tuning song skank_132_sync joined mid-song, as `bench live` does (0.37 of a beat
-    after a beat): its loudest pulse is the skank chords on the off-beats, and the tracker
-    locked on them and kept them to the end. The bass line changes pitch on the beats, and the
-    off-beat test on the heard grid (`analysis.offbeat_harmony`) moves the grid at the lock."""
+    """The tuning song skank_132_sync joined mid-song (0.37 of a beat after a beat, as `bench
+    live` joins), by a tracker told that the audio starts with the song: its loudest pulse is
+    the skank chords on the off-beats, and the tracker locked on them and kept them to the
+    end. The bass line changes pitch on the beats, and the off-beat test on the heard grid
+    (`analysis.offbeat_harmony`) moves the grid at the lock."""
     from quaddance.bench.live import join_mid_song
 
     joined, _ = join_mid_song(_tuning_midi_song("skank_132_sync", tmp_path), SR_HZ)
@@ -431,10 +432,11 @@ def test_tracker_joining_a_song_on_its_skank_moves_onto_the_beat_by_the_lock(
 
 
 def test_tracker_joining_a_song_follows_the_listener_that_trusts_no_first_sound() -> None:
-    """The tuning song synth_84_swing joined mid-song: the listener that takes the first sound
-    for a downbeat (right from a song's start) has heard an off-beat first and locks only
-    after 6 s. Once `FALLBACK_S` of music has passed, the tracker follows the other listener,
-    whose running means start evenly and which is locked by then, on the song's beats."""
+    """The tuning song synth_84_swing joined mid-song, by a tracker told that the audio starts
+    with the song: the listener that takes the first sound for a downbeat (right from a song's
+    start) has heard an off-beat first and locks only after 6 s. Once `FALLBACK_S` of music
+    has passed, the tracker follows the other listener, whose running means start evenly and
+    which is locked by then, on the song's beats."""
     from quaddance.bench.beats import SYNTH_SONGS, synth_song
     from quaddance.bench.live import _live_song, join_mid_song
 
@@ -447,6 +449,50 @@ def test_tracker_joining_a_song_follows_the_listener_that_trusts_no_first_sound(
         first_locked.append((block.t_end_s, tracker._first.locked))
     assert next(t for t, locked in first_locked if locked) > 6.0  # what the test is about
     assert _assert_locks_and_tracks(joined, 84.0) >= FALLBACK_S
+
+
+def test_tracker_that_may_join_music_playing_does_not_trust_its_first_sound(
+    tmp_path: Path,
+) -> None:
+    """The tuning song tune_skank_118 joined mid-song, as `bench live` joins. Told that the
+    audio starts with the song, the tracker follows the listener that takes the first sound
+    heard (an off-beat) for a downbeat, and it dances on the off-beats to the end; told that
+    the music may already be playing (``song_start=False``, as `live` is from a microphone),
+    it follows the listener whose means start evenly, on the beats."""
+    from quaddance.bench.live import join_mid_song
+
+    joined, _ = join_mid_song(_tuning_midi_song("tune_skank_118", tmp_path), SR_HZ)
+    events, locks, _ = _track(joined.y)  # what the test is about: off the beat
+    lock_s = _first_lock_s(locks)
+    assert (
+        np.mean(_errors_s(events, joined.beats_s, lock_s, joined.beats_s[-1]) <= HIT_WINDOW_S) < 0.1
+    )
+    _assert_locks_and_tracks(joined, 118.0, song_start=False)
+
+
+def test_tracker_that_may_join_music_trusts_the_first_sound_after_a_silence(
+    tmp_path: Path,
+) -> None:
+    """A song that starts after the tracker has heard a silence (a microphone started before
+    the music) starts where the tracker hears it start: the tracker that may join music
+    playing reports the same beats as one told that the audio starts with the song. The
+    tuning song piano_72_arpeggio, whose off-beat arpeggio notes put the listener with evenly
+    started means on them at double tempo."""
+    from quaddance.bench.beats import metrical_level_f_measure
+
+    song = _tuning_midi_song("piano_72_arpeggio", tmp_path)
+    silence_s = 2.0
+    hiss = 3e-5 * np.random.default_rng(0).standard_normal(round(silence_s * SR_HZ))  # -90 dBFS
+    y = np.concatenate([hiss.astype(np.float32), song.y])
+    told, locks, _ = _track(y, song_start=True)
+    unsure, _, _ = _track(y, song_start=False)
+    lock_s = _first_lock_s(locks)
+    assert lock_s <= silence_s + 6.0
+    # On the beats, at the song's tempo or twice it (after the hiss, this one doubles).
+    beats_s = np.array([e.time_s for e in told if e.time_s >= lock_s]) - silence_s
+    ref_s = song.beats_s[song.beats_s >= lock_s - silence_s]
+    assert len(beats_s) >= 20 and metrical_level_f_measure(ref_s, beats_s) >= 0.95
+    assert [e.time_s for e in unsure] == [e.time_s for e in told]
 
 
 def test_tracker_loses_lock_in_silence_and_finds_the_music_again() -> None:

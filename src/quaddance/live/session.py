@@ -87,7 +87,8 @@ def _listen(spec: dict, out: Any, go: Any, stop: Any) -> None:
         else:
             source = MicSource(spec["device"])
             duration_s = None
-        tracker = OnlineBeatTracker()
+        # A file plays from the song's start; a microphone may join music already playing.
+        tracker = OnlineBeatTracker(song_start=spec["from_file"] is not None)
         choreo = LiveChoreographer(
             spec["policy_hz"], TargetConfig(**spec["target_cfg"]), spec["seed"], spec["style"]
         )

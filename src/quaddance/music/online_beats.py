@@ -66,9 +66,15 @@ bass chroma of item 5):
    off-beat, and a wrong phase or tempo then holds for seconds: locks after 6 s). Started
    evenly (the mean of what has been heard), no sound dominates, but songs led by off-beat
    hats, skanks or no drums lose the phase their first downbeat gave them. So two listeners
-   (items 1-7 each, on the same spectra) hear the audio, one each way; the tracker follows
+   (items 1-7 each, on the same spectra) hear the audio, one each way. Told that the audio
+   starts with the song (``song_start``: a file played from its start), the tracker follows
    the first whenever it is locked, and the second while it is locked once ``FALLBACK_S`` of
-   music has passed (since the start or a silence reset) without a lock of the first.
+   music has passed (since the start or a silence reset) without a lock of the first. Told
+   that the music may already be playing (a microphone), it follows the second until it has
+   heard a silence (``SILENCE_RESET_S``): the music after it starts where it is heard, and
+   from then on the tracker chooses as from a song's start. Where both are locked on
+   different grids of a song joined mid-song, the second is the right one on nearly every
+   tuning song, while from a song's start the first is (most often on songs led by off-beats).
 """
 
 from __future__ import annotations
@@ -245,12 +251,14 @@ OFFBEAT_REST_BEATS = 4
 """Beats after a move of the grid before the off-beat test runs again."""
 
 FALLBACK_S = 5.5
-"""Music heard (since the start or a silence reset) after which the tracker follows the listener
-with evenly started means, while it is locked and the first listener is not (item 8). Chosen
-on the tuning set, against issue 11's goal of a lock within 6 s: 3.5 / 4.5 / 5.0 / 5.5 s kept
-the same 65 of 67 songs in time and 57 within 0.1 of the offline F from their start, and put
-64 of 67 joined mid-song in time (one listener: 45) and 45 / 47 / 48 / 49 within the F gap
-(one listener: 48); waiting longer lets the first listener, when it locks, keep its phase."""
+"""Music heard (since the start or a silence reset) after which a tracker told ``song_start``
+follows the listener with evenly started means, while it is locked and the first listener is
+not (item 8). Chosen on the tuning set, against issue 11's goal of a lock within 6 s: 3.5 /
+4.5 / 5.0 / 5.5 s kept the same 65 of 67 songs in time and 57 within 0.1 of the offline F from
+their start, and put 64 of 67 joined mid-song (by a tracker told ``song_start``) in time (one
+listener: 45) and 45 / 47 / 48 / 49 within the F gap (one listener: 48); waiting longer lets
+the first listener, when it locks, keep its phase. Told that the music may be playing, the
+tracker follows the second listener from the start instead: 64 and 55 of 67 joined."""
 
 SILENCE_DB = -50.0
 """Frames quieter than this, dB relative to the running loudness peak, are silence."""
@@ -537,15 +545,20 @@ class OnlineBeatTracker:
     Args:
         sr_hz: sample rate of the blocks given to ``update``; must be ``SR_HZ`` (the sources
             resample to it).
+        song_start: the audio starts where the music starts (a song file played from its
+            start). False where the music may already be playing (a microphone, a file
+            started part-way): then the first sound heard is any sound, and the listener
+            that trusts it is followed only once the music has started after a silence.
     """
 
-    def __init__(self, sr_hz: int = SR_HZ) -> None:
+    def __init__(self, sr_hz: int = SR_HZ, song_start: bool = True) -> None:
         if sr_hz != SR_HZ:
             raise ValueError(f"OnlineBeatTracker runs at {SR_HZ} Hz, got blocks at {sr_hz} Hz")
         self._feats = _Features()
         self._first = _Listener(self._feats, even_start=False)
         self._joined = _Listener(self._feats, even_start=True)
-        self._followed = self._first
+        self._first_trusted = song_start
+        self._followed = self._first if song_start else self._joined
         self._lock_s = float("nan")
 
     def update(self, block: np.ndarray, t_end_s: float) -> list[BeatEvent]:
@@ -563,9 +576,13 @@ class OnlineBeatTracker:
         frames_end_s = t_end_s - len(self._feats.pending) / SR_HZ
         first = self._first.feed(spectra, frames_end_s, t_end_s)
         joined = self._joined.feed(spectra, frames_end_s, t_end_s)
-        if self._first.locked:
+        if not self._first_trusted and self._first.silences > 0:
+            # The music after a silence starts where it is heard, as a song does.
+            self._first_trusted = True
             self._followed = self._first
-        elif self._joined.locked and self._first.heard_s >= FALLBACK_S:
+        if self._first.locked and self._first_trusted:
+            self._followed = self._first
+        elif self._joined.locked and (self._first.heard_s >= FALLBACK_S or not self._first_trusted):
             self._followed = self._joined
         if self._followed.locked and not np.isfinite(self._lock_s):
             self._lock_s = t_end_s
@@ -612,6 +629,7 @@ class _Listener:
         self._lags = np.zeros(0, dtype=int)
         self._weights = np.zeros(0)
         self._silent_frames = 0  # silent frames in a row
+        self._silences = 0  # silence resets so far
         self._reset_tracking()
 
     # --- public ----------------------------------------------------------------------------
@@ -619,6 +637,11 @@ class _Listener:
     @property
     def locked(self) -> bool:
         return self._locked
+
+    @property
+    def silences(self) -> int:
+        """Silence resets (``SILENCE_RESET_S``) so far."""
+        return self._silences
 
     @property
     def heard_s(self) -> float:
@@ -712,6 +735,7 @@ class _Listener:
         if self._is_silent(frame.rms):
             self._silent_frames += 1
             if self._silent_frames == reset_frames:
+                self._silences += 1
                 self._reset_tracking()
             if self._silent_frames >= reset_frames:
                 self._hist_start = self._n_frames  # the history restarts after the silence
