@@ -790,6 +790,23 @@ def bench_live_cmd(
             f" median lock {m['join_lock_s_median']} s, F online {m['join_f_online']:.3f} vs"
             f" offline {m['join_f_offline']:.3f}"
         )
+    goals = results["tracker"]["goals"]
+    console.print(
+        f"locked within {goals['lock_within_s']:g} s: {goals['songs_locked_in_time']} from"
+        f" the start, {goals['joining_mid_song']['songs_locked_in_time']} joined mid-song,"
+        f" {goals['after_silence_locked_in_time']} after a quiet room,"
+        f" {goals['with_noise_locked_in_time']} with noise; F online after a quiet room / with"
+        " noise: "
+        + ", ".join(
+            f"{name} {m['silence_f_online']:.3f} / {m['noisy_f_online']:.3f}"
+            for name, m in results["tracker"]["means"].items()
+        )
+    )
+    noise = results["tracker"]["noise"]
+    console.print(
+        f"steady noise ({noise['clips']} clips of {noise['duration_s']:g} s): locked in "
+        + ", ".join(f"{n} {where}" for where, n in noise["locked"].items())
+    )
     if dance:
         with tempfile.TemporaryDirectory(prefix="quaddance-bench-live-") as tmp:
             results["dance"] = bench_live_dance(

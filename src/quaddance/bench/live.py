@@ -396,16 +396,47 @@ def join_mid_song(song: LiveSong, sr: int) -> tuple[LiveSong, float]:
     return joined, join_s
 
 
+MIC_LEAD_S = 2.0
+"""The room heard before the song in the ``silence_`` scores: a microphone started first
+(-90 dBFS hiss), the tracker told that music may already be playing."""
+NOISY_SNR_DB = 10.0
+"""The ``noisy_`` scores: pink noise this far below the song's RMS (a fan in the room)."""
+
+
 def _score_song(song: LiveSong, sr: int) -> dict[str, Any]:
     """`_score_from_start` of ``song``, plus the same scores of the song joined mid-song
-    (`join_mid_song`) under ``join_`` names."""
+    (`join_mid_song`) under ``join_`` names; and the online tracker's lock and F when a
+    microphone heard a quiet room first (``silence_``) and with noise (``noisy_``)."""
     row = _score_from_start(song, sr)
     joined, join_s = join_mid_song(song, sr)
     scores = _score_from_start(joined, sr, song_start=False)
     row["join_s"] = round(join_s, 3)
     for key in ("lock_s", "f_online", "f_offline", "f_diff"):
         row[f"join_{key}"] = scores[key]
+    hiss = noise_clip("white", 0, MIC_LEAD_S, sr) * (3e-5 / 0.1)
+    row["silence_lock_s"], row["silence_f_online"] = _online_scores(
+        np.concatenate([hiss, song.y]), song.beats_s, sr, song_start=False, lead_s=MIC_LEAD_S
+    )
+    rms = float(np.sqrt(np.mean(song.y.astype(np.float64) ** 2)))
+    noise = noise_clip("pink", 1, len(song.y) / sr, sr) * (rms * 10 ** (-NOISY_SNR_DB / 20) / 0.1)
+    row["noisy_lock_s"], row["noisy_f_online"] = _online_scores(
+        song.y + noise, song.beats_s, sr, song_start=True
+    )
     return row
+
+
+def _online_scores(
+    y: np.ndarray, beats_s: np.ndarray, sr: int, song_start: bool, lead_s: float = 0.0
+) -> tuple[float | None, float]:
+    """(lock, song seconds or None, F after it) of the online tracker on ``y``: the song
+    whose ``beats_s`` start ``lead_s`` into it."""
+    beats, lock_track, _ = track_online(y, sr, song_start)
+    lock_s = _relock_s(lock_track, lead_s)
+    if lock_s is None:
+        return None, 0.0
+    online_s = np.array([b.time_s for b in beats]) - lead_s
+    f = metrical_level_f_measure(beats_s[beats_s >= lock_s], online_s[online_s >= lock_s])
+    return round(lock_s, 3), round(f, 4)
 
 
 def _score_from_start(song: LiveSong, sr: int, song_start: bool = True) -> dict[str, Any]:
@@ -476,7 +507,9 @@ def bench_live_tracker(
         ``join_s``, ``join_lock_s``, ``join_f_online``, ``join_f_offline``, ``join_f_diff``:
         the same scores when the tracker joins the song mid-song (`join_mid_song`), told
         that the music may already be playing (``song_start=False``, as `live` from a
-        microphone).
+        microphone); ``silence_lock_s``, ``silence_f_online`` and ``noisy_lock_s``,
+        ``noisy_f_online``: the online tracker heard after a quiet room and with noise
+        (`_score_song`). ``noise`` is `noise_locks`.
     """
     from quaddance.music.online_beats import LATENCY_S, SR_HZ
 
@@ -514,6 +547,8 @@ def bench_live_tracker(
             "join_lock_s_median": round(float(np.median(join_locks)), 3) if join_locks else None,
             "join_f_online": round(float(np.mean([r["join_f_online"] for r in in_set])), 4),
             "join_f_offline": round(float(np.mean([r["join_f_offline"] for r in in_set])), 4),
+            "silence_f_online": round(float(np.mean([r["silence_f_online"] for r in in_set])), 4),
+            "noisy_f_online": round(float(np.mean([r["noisy_f_online"] for r in in_set])), 4),
         }
     n_lock_goal = sum(1 for r in rows if r["lock_s"] is not None and r["lock_s"] <= GOAL_LOCK_S)
     n_f_goal = sum(1 for r in rows if r["f_diff"] >= -GOAL_F_GAP)
@@ -521,6 +556,10 @@ def bench_live_tracker(
         1 for r in rows if r["join_lock_s"] is not None and r["join_lock_s"] <= GOAL_LOCK_S
     )
     n_join_f = sum(1 for r in rows if r["join_f_diff"] >= -GOAL_F_GAP)
+
+    def in_time(key: str) -> str:
+        return f"{sum(1 for r in rows if r[key] is not None and r[key] <= GOAL_LOCK_S)}/{len(rows)}"
+
     return {
         "benchmark": "live_tracker",
         "metric": (
@@ -543,9 +582,51 @@ def bench_live_tracker(
                 "songs_locked_in_time": f"{n_join_lock}/{len(rows)}",
                 "songs_within_f_gap": f"{n_join_f}/{len(rows)}",
             },
+            # Since session 26, lock only: a microphone that heard a quiet room first
+            # (`MIC_LEAD_S`, from the song's start), and pink noise `NOISY_SNR_DB` below.
+            "after_silence_locked_in_time": in_time("silence_lock_s"),
+            "with_noise_locked_in_time": in_time("noisy_lock_s"),
         },
         "means": means,
         "songs": rows,
+        "noise": noise_locks(SR_HZ),
+    }
+
+
+NOISE_COLOURS = {"white": 0.0, "pink": 0.5, "brown": 1.0}
+"""Noise clips of `noise_locks`: amplitude spectrum ~ 1 / f ** exponent."""
+
+
+def noise_clip(colour: str, seed: int, duration_s: float, sr: int) -> np.ndarray:
+    """(n,) float32 noise of ``colour`` (`NOISE_COLOURS`) at -20 dBFS RMS."""
+    white = np.random.default_rng(seed).standard_normal(round(duration_s * sr))
+    spec = np.fft.rfft(white)
+    spec /= np.maximum(np.arange(len(spec)), 1) ** NOISE_COLOURS[colour]
+    y = np.fft.irfft(spec, len(white))
+    return (0.1 * y / np.sqrt(np.mean(y**2))).astype(np.float32)
+
+
+def noise_locks(sr: int, seeds: int = 6, duration_s: float = 12.0) -> dict[str, Any]:
+    """How often the tracker locks on steady noise, which has no beat: ``seeds`` clips of each
+    colour, heard from the stream's start (told ``song_start`` and not) and after 3 s of
+    silence (a microphone in a quiet room, then a fan)."""
+    clips = [noise_clip(c, 100 + k, duration_s, sr) for c in NOISE_COLOURS for k in range(seeds)]
+    silence = np.zeros(3 * sr, dtype=np.float32)
+    locked: dict[str, int] = {}
+    for key, song_start, lead in (
+        ("from_start", True, False),
+        ("from_start_song_start_false", False, False),
+        ("after_3_s_silence", False, True),
+    ):
+        tracks = [
+            track_online(np.concatenate([silence, y]) if lead else y, sr, song_start) for y in clips
+        ]
+        locked[key] = sum(any(lk for _, lk in track[1]) for track in tracks)
+    return {
+        "clips": len(clips),
+        "duration_s": duration_s,
+        "colours": list(NOISE_COLOURS),
+        "locked": locked,
     }
 
 
