@@ -287,7 +287,8 @@ SILENCE_RESET_S = 1.5
 gap between clicks at the slowest tempo); the music after it is heard as from the stream's
 start (item 4). A microphone that hears 2 s of -90 dBFS hiss before each tuning song: mean F
 0.831 without that restart, 0.872 with it (4 offsets of the song within a frame; each song
-from its start: 0.897)."""
+from its start: 0.897; measured before ``BURSTY_CV``)."""
+SILENCE_RESET_FRAMES = round(SILENCE_RESET_S / FRAME_S)
 SILENT_BEAT_PERIODS = 1.0
 """A predicted beat is not reported when the input has been silent for this many beat periods
 when it comes: the music has stopped, and the grid's beats until ``SILENCE_RESET_S`` are
@@ -431,7 +432,8 @@ class _Spectrum(NamedTuple):
     rms: float
     mel_db: np.ndarray  # (N_MELS,) mel spectrum, dB below the loudness reference
     bass_chroma: np.ndarray  # (12,) power of the bass band per pitch class
-    silent: bool  # quieter than SILENCE_DB below the loudness peak, or SILENCE_ABS_RMS
+    silent_frames: int  # silent frames in a row, this one included (0: not silent; silent is
+    # quieter than SILENCE_DB below the loudness peak, or than SILENCE_ABS_RMS)
     restart: bool  # the first sound after SILENCE_RESET_S of silence: heard as a stream start
 
 
@@ -506,7 +508,7 @@ class _Features:
         """One frame's fluxes against the previous frame, in dB below a decaying reference."""
         self.peak_rms = max(self.peak_rms * REF_DECAY, rms)
         silent = rms < max(SILENCE_ABS_RMS, self.peak_rms * 10 ** (SILENCE_DB / 20))
-        restart = not silent and self.silent_frames >= round(SILENCE_RESET_S / FRAME_S)
+        restart = not silent and self.silent_frames >= SILENCE_RESET_FRAMES
         self.silent_frames = self.silent_frames + 1 if silent else 0
         if restart:
             # Music after a silence is heard as from the stream's start: no frame before its
@@ -527,7 +529,7 @@ class _Features:
             rms,
             db,
             bass_chroma,
-            silent,
+            self.silent_frames,
             restart,
         )
 
@@ -544,13 +546,10 @@ class _Onsets:
 
     def __init__(self, even_start: bool) -> None:
         self.even_start = even_start
-        self._new_means()
+        self.restart()
 
     def restart(self) -> None:
         """Start the running means afresh, as at the stream's start."""
-        self._new_means()
-
-    def _new_means(self) -> None:
         fps = 1.0 / FRAME_S
         even_start = self.even_start
         self.mean_full = _Ema(5.0 * fps, even_start)
@@ -672,7 +671,7 @@ class _Listener:
         self._weights_period = 0.0  # period of the cached _best_past weights
         self._lags = np.zeros(0, dtype=int)
         self._weights = np.zeros(0)
-        self._silent_frames = 0  # silent frames in a row
+        self._silent_frames = 0  # silent frames in a row (the front end's count)
         self._silences = 0  # silence resets so far
         self._reset_tracking()
 
@@ -728,7 +727,7 @@ class _Listener:
             next_beat_in_bar=self._beat_in_bar(self._beat_index),
             last_beat_s=self._last_beat_s,
             energy=float(self._energy.value),
-            silent=self._silent_frames >= round(SILENCE_RESET_S * self._fps),
+            silent=self._silent_frames >= SILENCE_RESET_FRAMES,
             lock_s=lock_s,
         )
 
@@ -776,20 +775,16 @@ class _Listener:
     def _frame(self, spectrum: _Spectrum, t_s: float) -> None:
         self._n_frames += 1
         self._update_energy(spectrum.rms)
-        reset_frames = round(SILENCE_RESET_S * self._fps)
         if spectrum.restart:
             self._onsets.restart()  # the music starts again where it is heard, as a song does
         frame = self._onsets.frame(spectrum)
-        if spectrum.silent:
-            self._silent_frames += 1
-            if self._silent_frames == reset_frames:
-                self._silences += 1
-                self._reset_tracking()
-            if self._silent_frames >= reset_frames:
-                self._hist_start = self._n_frames  # the history restarts after the silence
-                return
-        else:
-            self._silent_frames = 0
+        self._silent_frames = spectrum.silent_frames
+        if self._silent_frames == SILENCE_RESET_FRAMES:
+            self._silences += 1
+            self._reset_tracking()
+        if self._silent_frames >= SILENCE_RESET_FRAMES:
+            self._hist_start = self._n_frames  # the history restarts after the silence
+            return
         self._heard_frames += 1
         self._push_history(frame)
         if self._heard_frames % self._tempo_hop == 0:
