@@ -397,6 +397,7 @@ def join_mid_song(song: LiveSong, sr: int) -> tuple[LiveSong, float]:
 
 
 MIC_LEAD_S = 2.0
+MIC_HISS_RMS = 3e-5
 """The room heard before the song in the ``silence_`` scores: a microphone started first
 (-90 dBFS hiss), the tracker told that music may already be playing."""
 NOISY_SNR_DB = 10.0
@@ -413,12 +414,14 @@ def _score_song(song: LiveSong, sr: int) -> dict[str, Any]:
     row["join_s"] = round(join_s, 3)
     for key in ("lock_s", "f_online", "f_offline", "f_diff"):
         row[f"join_{key}"] = scores[key]
-    hiss = noise_clip("white", 0, MIC_LEAD_S, sr) * (3e-5 / 0.1)
+    hiss = noise_clip("white", 0, MIC_LEAD_S, sr) * (MIC_HISS_RMS / NOISE_RMS)
     row["silence_lock_s"], row["silence_f_online"] = _online_scores(
         np.concatenate([hiss, song.y]), song.beats_s, sr, song_start=False, lead_s=MIC_LEAD_S
     )
     rms = float(np.sqrt(np.mean(song.y.astype(np.float64) ** 2)))
-    noise = noise_clip("pink", 1, len(song.y) / sr, sr) * (rms * 10 ** (-NOISY_SNR_DB / 20) / 0.1)
+    noise = noise_clip("pink", 1, len(song.y) / sr, sr) * (
+        rms * 10 ** (-NOISY_SNR_DB / 20) / NOISE_RMS
+    )
     row["noisy_lock_s"], row["noisy_f_online"] = _online_scores(
         song.y + noise, song.beats_s, sr, song_start=True
     )
@@ -428,8 +431,8 @@ def _score_song(song: LiveSong, sr: int) -> dict[str, Any]:
 def _online_scores(
     y: np.ndarray, beats_s: np.ndarray, sr: int, song_start: bool, lead_s: float = 0.0
 ) -> tuple[float | None, float]:
-    """(lock, song seconds or None, F after it) of the online tracker on ``y``: the song
-    whose ``beats_s`` start ``lead_s`` into it."""
+    """(lock time, song seconds, or None; F after the lock) of the online tracker on ``y``,
+    the song whose ``beats_s`` start ``lead_s`` into it."""
     beats, lock_track, _ = track_online(y, sr, song_start)
     lock_s = _relock_s(lock_track, lead_s)
     if lock_s is None:
@@ -550,15 +553,12 @@ def bench_live_tracker(
             "silence_f_online": round(float(np.mean([r["silence_f_online"] for r in in_set])), 4),
             "noisy_f_online": round(float(np.mean([r["noisy_f_online"] for r in in_set])), 4),
         }
-    n_lock_goal = sum(1 for r in rows if r["lock_s"] is not None and r["lock_s"] <= GOAL_LOCK_S)
-    n_f_goal = sum(1 for r in rows if r["f_diff"] >= -GOAL_F_GAP)
-    n_join_lock = sum(
-        1 for r in rows if r["join_lock_s"] is not None and r["join_lock_s"] <= GOAL_LOCK_S
-    )
-    n_join_f = sum(1 for r in rows if r["join_f_diff"] >= -GOAL_F_GAP)
 
     def in_time(key: str) -> str:
         return f"{sum(1 for r in rows if r[key] is not None and r[key] <= GOAL_LOCK_S)}/{len(rows)}"
+
+    def in_gap(key: str) -> str:
+        return f"{sum(1 for r in rows if r[key] >= -GOAL_F_GAP)}/{len(rows)}"
 
     return {
         "benchmark": "live_tracker",
@@ -572,15 +572,15 @@ def bench_live_tracker(
         "goals": {
             "lock_within_s": GOAL_LOCK_S,
             "f_gap_at_most": GOAL_F_GAP,
-            "songs_locked_in_time": f"{n_lock_goal}/{len(rows)}",
-            "songs_within_f_gap": f"{n_f_goal}/{len(rows)}",
+            "songs_locked_in_time": in_time("lock_s"),
+            "songs_within_f_gap": in_gap("f_diff"),
             # The same goals for the songs joined mid-song (`join_mid_song`): music already
             # playing, as in a room, heard by a tracker told so (``song_start=False``, since
             # session 26). Measured since session 24; issue 11 states its goals for the songs
             # from their start.
             "joining_mid_song": {
-                "songs_locked_in_time": f"{n_join_lock}/{len(rows)}",
-                "songs_within_f_gap": f"{n_join_f}/{len(rows)}",
+                "songs_locked_in_time": in_time("join_lock_s"),
+                "songs_within_f_gap": in_gap("join_f_diff"),
             },
             # Since session 26, lock only: a microphone that heard a quiet room first
             # (`MIC_LEAD_S`, from the song's start), and pink noise `NOISY_SNR_DB` below.
@@ -595,6 +595,8 @@ def bench_live_tracker(
 
 NOISE_COLOURS = {"white": 0.0, "pink": 0.5, "brown": 1.0}
 """Noise clips of `noise_locks`: amplitude spectrum ~ 1 / f ** exponent."""
+NOISE_RMS = 0.1
+"""RMS of a `noise_clip` (-20 dBFS)."""
 
 
 def noise_clip(colour: str, seed: int, duration_s: float, sr: int) -> np.ndarray:
@@ -603,7 +605,7 @@ def noise_clip(colour: str, seed: int, duration_s: float, sr: int) -> np.ndarray
     spec = np.fft.rfft(white)
     spec /= np.maximum(np.arange(len(spec)), 1) ** NOISE_COLOURS[colour]
     y = np.fft.irfft(spec, len(white))
-    return (0.1 * y / np.sqrt(np.mean(y**2))).astype(np.float32)
+    return (NOISE_RMS * y / np.sqrt(np.mean(y**2))).astype(np.float32)
 
 
 def noise_locks(sr: int, seeds: int = 6, duration_s: float = 12.0) -> dict[str, Any]:
