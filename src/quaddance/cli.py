@@ -765,9 +765,10 @@ def bench_live_cmd(
     ] = True,
 ) -> None:
     """Online beat tracking vs the offline analyser (lock time, F-measure) on songs with exact
-    beats not tuned on, heard from their start and joined mid-song; then the whole live loop on
-    the simulated robot: falls, loop time, latency, the robot's motion accents on the true
-    beats. Writes JSON."""
+    beats not tuned on, heard from their start and joined mid-song (also: after a quiet room,
+    with noise, and whether noise alone locks it); then the whole live loop on the simulated
+    robot: falls, loop time, latency, the robot's motion accents on the true beats. Writes
+    JSON."""
     import tempfile
 
     from rich.console import Console
