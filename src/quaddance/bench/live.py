@@ -438,8 +438,12 @@ def _online_scores(
     if lock_s is None:
         return None, 0.0
     online_s = np.array([b.time_s for b in beats]) - lead_s
-    f = metrical_level_f_measure(beats_s[beats_s >= lock_s], online_s[online_s >= lock_s])
-    return round(lock_s, 3), round(f, 4)
+    return round(lock_s, 3), round(_f_after(beats_s, online_s, lock_s), 4)
+
+
+def _f_after(ref_s: np.ndarray, est_s: np.ndarray, start_s: float) -> float:
+    """`metrical_level_f_measure` of the beats at or after ``start_s`` (the lock)."""
+    return metrical_level_f_measure(ref_s[ref_s >= start_s], est_s[est_s >= start_s])
 
 
 def _score_from_start(song: LiveSong, sr: int, song_start: bool = True) -> dict[str, Any]:
@@ -461,9 +465,8 @@ def _score_from_start(song: LiveSong, sr: int, song_start: bool = True) -> dict[
     # Scored after the lock, for both trackers, so that the offline analyser is judged on the
     # same stretch of music; a song that never locks scores 0 online.
     start_s = lock_s if lock_s is not None else duration_s
-    ref = song.beats_s[song.beats_s >= start_s]
-    f_online = metrical_level_f_measure(ref, online_s[online_s >= start_s])
-    f_offline = metrical_level_f_measure(ref, offline_s[offline_s >= start_s])
+    f_online = _f_after(song.beats_s, online_s, start_s)
+    f_offline = _f_after(song.beats_s, offline_s, start_s)
     if lock_s is None:
         f_offline = metrical_level_f_measure(song.beats_s, offline_s)
     # Downbeats: strict F-measure (a bar phase one beat off scores 0), same span.

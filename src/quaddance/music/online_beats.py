@@ -483,6 +483,7 @@ class _Features:
         self.prev_log: np.ndarray | None = None
         self.peak_rms = 0.0
         self.silent_frames = 0  # silent frames in a row
+        self.silences = 0  # silences of SILENCE_RESET_S so far (the listeners reset at each)
 
     def push(self, samples: np.ndarray) -> list[_Spectrum]:
         """Add samples; return the features of each new frame."""
@@ -510,6 +511,7 @@ class _Features:
         silent = rms < max(SILENCE_ABS_RMS, self.peak_rms * 10 ** (SILENCE_DB / 20))
         restart = not silent and self.silent_frames >= SILENCE_RESET_FRAMES
         self.silent_frames = self.silent_frames + 1 if silent else 0
+        self.silences += self.silent_frames == SILENCE_RESET_FRAMES
         if restart:
             # Music after a silence is heard as from the stream's start: no frame before its
             # first one (no flux), and its own loudness reference.
@@ -620,7 +622,7 @@ class OnlineBeatTracker:
         frames_end_s = t_end_s - len(self._feats.pending) / SR_HZ
         first = self._first.feed(spectra, frames_end_s, t_end_s)
         joined = self._joined.feed(spectra, frames_end_s, t_end_s)
-        if not self._first_trusted and self._first.silences > 0:
+        if not self._first_trusted and self._feats.silences > 0:
             # The music after a silence starts where it is heard, as a song does.
             self._first_trusted = True
             self._followed = self._first
@@ -672,7 +674,6 @@ class _Listener:
         self._lags = np.zeros(0, dtype=int)
         self._weights = np.zeros(0)
         self._silent_frames = 0  # silent frames in a row (the front end's count)
-        self._silences = 0  # silence resets so far
         self._reset_tracking()
 
     # --- public ----------------------------------------------------------------------------
@@ -680,11 +681,6 @@ class _Listener:
     @property
     def locked(self) -> bool:
         return self._locked
-
-    @property
-    def silences(self) -> int:
-        """Silence resets (``SILENCE_RESET_S``) so far."""
-        return self._silences
 
     @property
     def heard_s(self) -> float:
@@ -780,7 +776,6 @@ class _Listener:
         frame = self._onsets.frame(spectrum)
         self._silent_frames = spectrum.silent_frames
         if self._silent_frames == SILENCE_RESET_FRAMES:
-            self._silences += 1
             self._reset_tracking()
         if self._silent_frames >= SILENCE_RESET_FRAMES:
             self._hist_start = self._n_frames  # the history restarts after the silence
