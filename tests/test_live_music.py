@@ -418,6 +418,17 @@ def test_tracker_locks_on_a_clave_that_leaves_two_beats_of_the_bar_empty(tmp_pat
     _assert_locks_and_tracks(_tuning_midi_song("tune_clave_138", tmp_path), 138.0)
 
 
+@pytest.mark.parametrize(("name", "bpm"), [("funk_104_sync", 104.0), ("tune_clave_100", 100.0)])
+def test_tracker_hears_a_syncopated_groove_at_its_beat_not_at_4_3_of_it(
+    name: str, bpm: float, tmp_path: Path
+) -> None:
+    """Tuning songs whose syncopated parts (3+3+2 sixteenths, a clave) repeat every 3
+    sixteenths: the tempo's autocorrelation is as strong at 4/3 of the beat's tempo as at it,
+    and the tracker locked there (F 0.41 and 0.22). The autocorrelation at 2 and 4 periods (the
+    half bar and the bar) tells them apart: the three-four test moves the tempo to the beat."""
+    _assert_locks_and_tracks(_tuning_midi_song(name, tmp_path), bpm)
+
+
 def test_tracker_joining_a_song_on_its_skank_moves_onto_the_beat_by_the_lock(
     tmp_path: Path,
 ) -> None:
