@@ -359,3 +359,23 @@ def test_deploy_refuses_bad_input_in_one_line(tmp_path):
         assert done.returncode == 2, done.stderr
         assert done.stderr.strip().count("\n") == 0 and needle in done.stderr, done.stderr
         assert not (tmp_path / "o" / "deploy.json").exists()
+
+
+@pytest.mark.parametrize("start_s", [0.0, 5.0])
+def test_the_song_plays_from_where_the_dance_starts_or_not_at_all(monkeypatch, start_s):
+    """The runner's player starts the song ``song_start_s`` into it (``live --start``);
+    afplay, which cannot, plays only songs from their start."""
+    import shutil
+
+    from quaddance.deploy import runner
+
+    monkeypatch.setattr(os.path, "exists", lambda p: True)  # a sound device
+    monkeypatch.setattr(shutil, "which", lambda name: f"/usr/bin/{name}")
+    audio = runner._Audio(Path("song.wav"), start_s)
+    assert audio._cmd[0] == "ffplay" and audio._cmd[-3:] == ["-ss", f"{start_s:g}", "song.wav"]
+    monkeypatch.setattr(
+        shutil, "which", lambda name: "/usr/bin/afplay" if name == "afplay" else None
+    )
+    audio = runner._Audio(Path("song.wav"), start_s)
+    assert (audio._cmd == ["afplay", "song.wav"]) == (start_s == 0)
+    assert (audio.status == "ready") == (start_s == 0)

@@ -209,6 +209,12 @@ def test_live_errors_are_one_line(tmp_path, song):
     assert "Traceback" not in proc.stderr
     proc = _live("--from-file", str(tmp_path / "nope.wav"), "--out", str(tmp_path), timeout=60)
     assert proc.returncode == 2 and "nope.wav" in proc.stderr and "Traceback" not in proc.stderr
+    proc = _live("--start", "3", "--out", str(tmp_path), timeout=60)
+    assert proc.returncode == 2 and "--start needs --from-file" in proc.stderr
+    assert "Traceback" not in proc.stderr
+    proc = _live("--from-file", str(song), "--start", "12", "--out", str(tmp_path), timeout=120)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert "song.wav: --start 12 s is not within the song" in proc.stderr.replace("\n", "")
 
 
 def test_microphone_without_a_sound_card_is_one_line(tmp_path):
@@ -226,12 +232,13 @@ def test_microphone_without_a_sound_card_is_one_line(tmp_path):
     assert "Traceback" not in proc.stderr
 
 
-@pytest.mark.parametrize("from_file", [True, False])
+@pytest.mark.parametrize(("from_file", "start_s"), [(True, 0.0), (True, 2.0), (False, 0.0)])
 def test_the_listener_tells_the_tracker_whether_music_may_already_be_playing(
-    monkeypatch, from_file
+    monkeypatch, from_file, start_s
 ):
-    """A file plays from the song's start; a microphone may join music already playing: the
-    tracker's ``song_start`` (which listener it trusts first, `music.online_beats`)."""
+    """A file played from its start starts with the song; a microphone, or a file started
+    part-way (``--start``), may join music already playing: the tracker's ``song_start``
+    (which listener it trusts first, `music.online_beats`)."""
     import queue
     import threading
 
@@ -240,6 +247,7 @@ def test_the_listener_tells_the_tracker_whether_music_may_already_be_playing(
     from quaddance.music import online_beats
 
     told: list[bool] = []
+    opened: list[float] = []
 
     class Tracker(online_beats.OnlineBeatTracker):
         def __init__(self, *args, **kwargs):
@@ -250,7 +258,7 @@ def test_the_listener_tells_the_tracker_whether_music_may_already_be_playing(
         duration_s = 0.1
 
         def __init__(self, *args, **kwargs):
-            pass
+            opened.append(kwargs.get("start_s", 0.0))
 
         def __iter__(self):
             return iter(music_live.ArraySource(np.zeros(2205, np.float32), 22050))
@@ -261,6 +269,7 @@ def test_the_listener_tells_the_tracker_whether_music_may_already_be_playing(
     cfg = TargetConfig()
     spec = {
         "from_file": "song.wav" if from_file else None,
+        "start_s": start_s,
         "device": None,
         "policy_hz": HZ,
         "target_cfg": {f: getattr(cfg, f) for f in cfg.__dataclass_fields__},
@@ -274,7 +283,38 @@ def test_the_listener_tells_the_tracker_whether_music_may_already_be_playing(
     messages = [out.get_nowait() for _ in range(out.qsize())]
     assert messages[0][0] == "ready" and messages[-1] == ("end", None)
     assert len(messages) > 3  # the blocks went through the tracker
-    assert told == [from_file]
+    assert told == [from_file and start_s == 0]
+    assert opened == [start_s]
+
+
+def test_live_from_file_started_part_way_dances_the_rest(song, tmp_path):
+    """--start joins the 9 s song 5 s in: the dance lasts the 4 s left, live.json says where
+    it started, and its times count from there."""
+    proc = _live(
+        "--from-file", str(song), "--start", "5", "--style", "calm", "--out", str(tmp_path)
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    live = json.loads((tmp_path / "live.json").read_text())
+    assert live["start_s"] == 5.0
+    assert live["duration_s"] == pytest.approx(4.0, abs=0.1)
+    beats = np.asarray(live["beats_s"])
+    assert np.all((beats >= 0.0) & (beats <= 4.1))
+
+
+def test_live_video_plays_the_song_from_where_the_dance_heard_it(monkeypatch, tmp_path):
+    from quaddance.deploy.runner import STATES
+    from quaddance.live import session
+    from quaddance.play import video
+
+    calls = []
+    monkeypatch.setattr(video, "render_video", lambda *a, **k: calls.append((a, k)))
+    n = 10
+    rollout = SimpleNamespace(base_rpy_rad=np.zeros((n, 3)), base_height_m=np.full(n, 0.27), fps=HZ)
+    log = {"state": np.full(n, STATES.index("dance")), "q": np.zeros((n, 12))}
+    session._video(tmp_path / "dance.mp4", rollout, log, tmp_path / "song.wav", 5.0)
+    ((args, kwargs),) = calls
+    assert kwargs["audio_path"] == tmp_path / "song.wav" and kwargs["audio_offset_s"] == 5.0
+    assert args[1].shape == (n, 19)  # free joint (position, quaternion) and 12 joints
 
 
 def test_live_with_viewer_and_video(song, tmp_path):

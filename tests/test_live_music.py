@@ -116,6 +116,19 @@ def test_file_source_without_pacing_yields_the_files_samples(tmp_path: Path) -> 
     assert blocks[0].t_start_s == 0.0
 
 
+def test_file_source_started_part_way_plays_the_rest_in_its_own_time(tmp_path: Path) -> None:
+    y, _ = _click_track([(90.0, 3.0)])
+    path = _write_wav(tmp_path / "clicks.wav", y)
+    expected, sr = load_audio(path, sr=SR_HZ)
+    blocks = list(FileSource(path, realtime=False, start_s=1.25))
+    first = round(1.25 * sr)
+    np.testing.assert_array_equal(np.concatenate([b.samples for b in blocks]), expected[first:])
+    assert blocks[0].t_start_s == 0.0  # song time counts from where it started
+    for start_s in (3.5, -1.0, float("nan")):
+        with pytest.raises(InputFileError, match=r"clicks\.wav: --start .* is not within"):
+            FileSource(path, realtime=False, start_s=start_s)
+
+
 def test_file_source_refuses_bad_files_like_every_command(tmp_path: Path) -> None:
     with pytest.raises(InputFileError, match="no such file"):
         FileSource(tmp_path / "missing.wav")

@@ -584,6 +584,15 @@ def live_cmd(
             help="Feed this song through the live path at real-time pace (default: microphone).",
         ),
     ] = None,
+    start: Annotated[
+        float,
+        typer.Option(
+            "--start",
+            help="With --from-file: play from this far into the song, s, as music already "
+            "playing (times in the outputs count from there).",
+            callback=finite_in(0.0, 36000.0),
+        ),
+    ] = 0.0,
     device: Annotated[
         str | None, typer.Option(help="Microphone or line-in (sounddevice name or index).")
     ] = None,
@@ -626,6 +635,7 @@ def live_cmd(
     job = LiveJob(
         out_dir=out,
         from_file=from_file,
+        start_s=start,
         device=device,
         robot=robot,
         policy=policy,

@@ -179,6 +179,7 @@ class DeployOptions:
     auto_start: bool = False  #: start the dance without waiting for Enter
     inject: list[tuple[str, float]] = field(default_factory=list)  #: (fault, dance time s)
     song: Path | None = None  #: played where an audio device exists
+    song_start_s: float = 0.0  #: ... from this far into it
     safety: SafetyCfg = field(default_factory=SafetyCfg)
 
 
@@ -211,7 +212,7 @@ class _Stop:
 class _Audio:
     """Music from an external player where the machine has a sound device; else silence."""
 
-    def __init__(self, song: Path | None) -> None:
+    def __init__(self, song: Path | None, start_s: float = 0.0) -> None:
         self.song = song
         self.proc: subprocess.Popen | None = None
         self._cmd: list[str] | None = None
@@ -219,8 +220,11 @@ class _Audio:
         if song is None:
             return
         player = None
+        # afplay cannot start part-way into a song.
+        players = [["ffplay", "-nodisp", "-autoexit", "-loglevel", "quiet", "-ss", f"{start_s:g}"]]
+        players += [["afplay"]] if start_s == 0 else []
         if os.path.exists("/dev/snd") or sys.platform == "darwin":
-            for cmd in (["ffplay", "-nodisp", "-autoexit", "-loglevel", "quiet"], ["afplay"]):
+            for cmd in players:
                 if shutil.which(cmd[0]):
                     player = cmd
                     break
@@ -363,7 +367,7 @@ class Runner:
             self.robot.close()
 
     def _run(self) -> DeployResult:
-        self.audio = _Audio(self.opt.song)
+        self.audio = _Audio(self.opt.song, self.opt.song_start_s)
         if self.opt.song is not None:
             self.status(f"music: {self.audio.status}")
         self.status(f"connecting to the robot ({self.robot.name})")

@@ -39,6 +39,7 @@ class LiveJob:
 
     out_dir: Path
     from_file: Path | None = None  #: a song fed at real-time pace; None: the microphone
+    start_s: float = 0.0  #: with from_file: play from this far into it (music already playing)
     device: str | None = None  #: microphone (sounddevice name or index); None: default
     robot: str = "sim"
     policy: Path | None = None
@@ -82,13 +83,15 @@ def _listen(spec: dict, out: Any, go: Any, stop: Any) -> None:
         from quaddance.targets import TargetConfig
 
         if spec["from_file"] is not None:
-            source: Any = FileSource(spec["from_file"], realtime=True)
+            source: Any = FileSource(spec["from_file"], realtime=True, start_s=spec["start_s"])
             duration_s = source.duration_s
         else:
             source = MicSource(spec["device"])
             duration_s = None
-        # A file plays from the song's start; a microphone may join music already playing.
-        tracker = OnlineBeatTracker(song_start=spec["from_file"] is not None)
+        # A file played from its start starts with the song; a microphone, or a file started
+        # part-way, may join music already playing.
+        song_start = spec["from_file"] is not None and spec["start_s"] == 0
+        tracker = OnlineBeatTracker(song_start=song_start)
         choreo = LiveChoreographer(
             spec["policy_hz"], TargetConfig(**spec["target_cfg"]), spec["seed"], spec["style"]
         )
@@ -224,6 +227,8 @@ def run_live(job: LiveJob, status=lambda msg: None) -> tuple[dict, dict[str, Pat
         raise InputFileError(job.from_file, "no such file")
     if job.video and job.from_file is None:
         raise QuaddanceError("--video needs --from-file (a microphone's sound is not kept)")
+    if job.start_s != 0 and job.from_file is None:
+        raise QuaddanceError("--start needs --from-file (a microphone hears what plays now)")
     if job.seconds is not None and not (np.isfinite(job.seconds) and job.seconds > 0):
         raise QuaddanceError(f"--seconds must be > 0, got {job.seconds}")
     policy = OnnxPolicy.load(job.policy or shipped_policy_path())
@@ -237,6 +242,7 @@ def run_live(job: LiveJob, status=lambda msg: None) -> tuple[dict, dict[str, Pat
     cfg = target_config_for(policy, "feasible")
     spec = {
         "from_file": None if job.from_file is None else str(job.from_file),
+        "start_s": job.start_s,
         "device": job.device,
         "policy_hz": policy.task.policy_hz,
         "target_cfg": {f: getattr(cfg, f) for f in cfg.__dataclass_fields__},
@@ -262,7 +268,9 @@ def run_live(job: LiveJob, status=lambda msg: None) -> tuple[dict, dict[str, Pat
             viewer = LiveViewer(build_model(SceneCfg(), visual=True), host=job.host, port=job.port)
             status(f"viewer: {', '.join(viewer.urls)}")
         feed = _LiveFeed(updates, viewer)
-        options = DeployOptions(seconds=duration_s, auto_start=True, song=job.from_file)
+        options = DeployOptions(
+            seconds=duration_s, auto_start=True, song=job.from_file, song_start_s=job.start_s
+        )
         robot = make_robot(
             DeployJob(
                 out_dir=out,
@@ -301,6 +309,8 @@ def run_live(job: LiveJob, status=lambda msg: None) -> tuple[dict, dict[str, Pat
     beats = np.asarray(feed.beats_s, dtype=float)
     summary: dict[str, Any] = {
         "source": str(job.from_file) if job.from_file is not None else "microphone",
+        # Song time 0 is this far into the file (times below are from where it started).
+        "start_s": job.start_s,
         "robot": job.robot,
         "policy": str(policy.onnx_path),
         "duration_s": result.summary.get("duration_s"),
@@ -322,7 +332,9 @@ def run_live(job: LiveJob, status=lambda msg: None) -> tuple[dict, dict[str, Pat
         standing_m = policy.task.rewards.base_height_target_m
         summary.update(whole_body_metrics(rollout, beats, standing_m))
         if job.video:
-            paths["video"] = _video(out / "dance.mp4", rollout, result.log, job.from_file)
+            paths["video"] = _video(
+                out / "dance.mp4", rollout, result.log, job.from_file, job.start_s
+            )
     paths["live"] = out / "live.json"
     write_json(paths["live"], summary)
     return summary, paths
@@ -359,9 +371,9 @@ def _tracker_latency_ms() -> float:
     return round(LATENCY_S * 1e3, 1)
 
 
-def _video(path: Path, rollout, log: dict, song: Path) -> Path:
+def _video(path: Path, rollout, log: dict, song: Path, start_s: float = 0.0) -> Path:
     """dance.mp4 from the danced poses (trunk from the simulator, joints from the encoders)
-    with the song, afterwards."""
+    with the song from ``start_s`` into it (where the dance heard it), afterwards."""
     from quaddance.deploy.runner import STATES
     from quaddance.play.video import render_video
 
@@ -386,5 +398,7 @@ def _video(path: Path, rollout, log: dict, song: Path) -> Path:
     )
     n = q.shape[0]
     qpos = np.column_stack([np.zeros((n, 2)), rollout.base_height_m, quat, q])
-    render_video(None, qpos, rollout.fps, path, audio_path=song, progress=False)
+    render_video(
+        None, qpos, rollout.fps, path, audio_path=song, audio_offset_s=start_s, progress=False
+    )
     return path

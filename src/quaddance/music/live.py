@@ -98,14 +98,32 @@ class FileSource(ArraySource):
         path: wav, flac, ogg or mp3 file.
         block_s: block length, seconds.
         realtime: pace blocks by the wall clock; False is for tests and benchmarks only.
+        start_s: play from this far into the file, seconds (music already playing, as a
+            microphone in a room hears it); song time 0 is there.
+
+    Raises:
+        InputFileError: the file cannot be read, or ``start_s`` is not within it.
     """
 
-    def __init__(self, path: str | Path, block_s: float = BLOCK_S, realtime: bool = True) -> None:
+    def __init__(
+        self,
+        path: str | Path,
+        block_s: float = BLOCK_S,
+        realtime: bool = True,
+        start_s: float = 0.0,
+    ) -> None:
+        from quaddance.errors import InputFileError
         from quaddance.music.audio import load_audio
 
         self.path = Path(path)
         y, sr = load_audio(path, sr=SR_HZ)
-        super().__init__(y, sr, block_s=block_s, realtime=realtime)
+        first = round(start_s * sr) if np.isfinite(start_s) else -1
+        if not 0 <= first < len(y):
+            raise InputFileError(
+                path, f"--start {start_s:g} s is not within the song (0 to {len(y) / sr:.1f} s)"
+            )
+        self.start_s = first / sr
+        super().__init__(y[first:], sr, block_s=block_s, realtime=realtime)
 
 
 def _import_sounddevice() -> Any:
