@@ -689,6 +689,49 @@ def test_bench_live_scores_a_song_heard_after_a_quiet_room_in_song_time() -> Non
     assert lock_s == pytest.approx(lock_alone_s, abs=0.5)  # the lead shifts the frame grid
 
 
+def test_bench_live_shifts_scores_each_song_moved_within_a_frame(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """`bench live --shifts N` tracks every song again with its audio moved by k/N of an onset
+    frame (k < N), in song time, and averages the goals over the N shifts."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from quaddance.bench import live as bench_live
+    from quaddance.cli import app
+
+    y, ref = _click_track([(120.0, 12.0)])
+    song = bench_live.LiveSong("clicks_120", "heldout", y, ref, ref[::4])
+    joined, _ = bench_live.join_mid_song(song, SR_HZ)
+    more = bench_live._shifted_scores(song, joined, SR_HZ, 3)
+    assert {k: len(v) for k, v in more.items()} == dict.fromkeys(bench_live.SHIFTED_KEYS, 2)
+    assert min(more["f_online"]) >= 0.95 and min(more["join_f_online"]) >= 0.9
+    # Scored in song time (the lead of silence is told to the scorer): a click track locks
+    # at the same beat whatever the shift, within a frame (11.6 ms; the shifts are 4 and 8 ms).
+    alone_s, _ = bench_live._online_scores(y, ref, SR_HZ, song_start=True)
+    assert np.ptp([alone_s, *more["lock_s"]]) <= 0.012
+
+    monkeypatch.setattr(bench_live, "live_case_songs", lambda sets, sr, cache_dir: [song])
+    monkeypatch.setattr(
+        bench_live, "noise_locks", lambda sr: {"clips": 0, "duration_s": 0.0, "locked": {}}
+    )
+    out = tmp_path / "live.json"
+    cli = ["bench", "live", "--tracker-only", "--sets", "heldout", "--shifts", "3", "-o", str(out)]
+    result = CliRunner().invoke(app, cli)
+    assert result.exit_code == 0, result.output
+    tracker = json.loads(out.read_text())["tracker"]
+    (row,) = tracker["songs"]
+    assert [len(row["shifted"][k]) for k in bench_live.SHIFTED_KEYS] == [3, 3, 3, 3]
+    assert row["shifted"]["f_online"][0] == row["f_online"]  # shift 0 is the row itself
+    assert row["shifted"]["lock_s"][1:] == more["lock_s"]
+    shifted = tracker["goals"]["shifted"]
+    assert shifted["shifts"] == 3
+    assert shifted["songs_locked_in_time"] == 1.0 and shifted["songs_within_f_gap"] == 1.0
+    assert shifted["f_online"] == pytest.approx(np.mean(row["shifted"]["f_online"]), abs=1e-4)
+    assert "averaged over 3 shifts within a frame" in result.output
+
+
 def test_bench_live_joins_songs_mid_song_between_beats() -> None:
     """`bench live` also scores each song joined a third in, 0.37 of a beat after a beat: the
     tracker hears neither the song's start (every bench song starts on its first downbeat)

@@ -773,6 +773,16 @@ def bench_live_cmd(
             "8 min for live and heldout; 5 min for the tuning songs).",
         ),
     ] = True,
+    shifts: Annotated[
+        int,
+        typer.Option(
+            help="Also track every song with its audio moved by k/N of an onset frame (k < N)"
+            " and average the goals over the N shifts: single runs flip songs, the means are"
+            " steadier (to compare tracker changes).",
+            min=1,
+            max=16,
+        ),
+    ] = 1,
 ) -> None:
     """Online beat tracking vs the offline analyser (lock time, F-measure) on songs with exact
     beats not tuned on, heard from their start and joined mid-song (also: after a quiet room,
@@ -791,7 +801,10 @@ def bench_live_cmd(
     with console.status("Tracking beats online...") as status:
         results = {
             "tracker": bench_live_tracker(
-                chosen, n_random=random, progress=lambda n: status.update(f"Tracking {n}...")
+                chosen,
+                n_random=random,
+                progress=lambda n: status.update(f"Tracking {n}..."),
+                shifts=shifts,
             )
         }
     for name, m in results["tracker"]["means"].items():
@@ -813,6 +826,16 @@ def bench_live_cmd(
             for name, m in results["tracker"]["means"].items()
         )
     )
+    if "shifted" in goals:
+        s = goals["shifted"]
+        j = s["joining_mid_song"]
+        console.print(
+            f"averaged over {s['shifts']} shifts within a frame: from the start"
+            f" {s['songs_locked_in_time']:g} locked in time, {s['songs_within_f_gap']:g}"
+            f" within the F gap, F online {s['f_online']:.3f}; joined mid-song"
+            f" {j['songs_locked_in_time']:g}, {j['songs_within_f_gap']:g},"
+            f" F {j['f_online']:.3f} (of {len(results['tracker']['songs'])} songs)"
+        )
     noise = results["tracker"]["noise"]
     console.print(
         f"steady noise ({noise['clips']} clips of {noise['duration_s']:g} s): locked in "
