@@ -436,6 +436,16 @@ def _score_song(song: LiveSong, sr: int, shifts: int = 1) -> dict[str, Any]:
 SHIFTED_KEYS = ("lock_s", "f_online", "join_lock_s", "join_f_online")
 
 
+def _in_time(lock_s: float | None) -> bool:
+    """Issue 11's lock goal: locked within `GOAL_LOCK_S`."""
+    return lock_s is not None and lock_s <= GOAL_LOCK_S
+
+
+def _in_gap(f_diff: float) -> bool:
+    """Issue 11's F goal: online F at most `GOAL_F_GAP` below the offline F."""
+    return f_diff >= -GOAL_F_GAP
+
+
 def _shifted_scores(
     song: LiveSong, joined: LiveSong, sr: int, shifts: int
 ) -> dict[str, list[float | None]]:
@@ -463,27 +473,27 @@ def _shifted_goals(rows: list[dict[str, Any]], shifts: int) -> dict[str, Any]:
     """The tracker's goals counted at each shift of `_shifted_scores` and averaged over the
     shifts (the F gap against the offline F of the unshifted row)."""
 
-    def mean_count(key: str, ok: Callable[[Any, dict[str, Any]], bool]) -> float:
-        counts = [sum(ok(r["shifted"][key][k], r) for r in rows) for k in range(shifts)]
+    def mean_in_time(key: str) -> float:
+        counts = [sum(_in_time(r["shifted"][key][k]) for r in rows) for k in range(shifts)]
+        return round(float(np.mean(counts)), 2)
+
+    def mean_in_gap(key: str, offline_key: str) -> float:
+        counts = [
+            sum(_in_gap(r["shifted"][key][k] - r[offline_key]) for r in rows) for k in range(shifts)
+        ]
         return round(float(np.mean(counts)), 2)
 
     def mean_f(key: str) -> float:
         return round(float(np.mean([r["shifted"][key] for r in rows])), 4)
 
-    def in_time(lock_s: Any, row: dict[str, Any]) -> bool:
-        return lock_s is not None and lock_s <= GOAL_LOCK_S
-
-    def in_gap(offline_key: str) -> Callable[[Any, dict[str, Any]], bool]:
-        return lambda f, row: f - row[offline_key] >= -GOAL_F_GAP
-
     return {
         "shifts": shifts,
-        "songs_locked_in_time": mean_count("lock_s", in_time),
-        "songs_within_f_gap": mean_count("f_online", in_gap("f_offline")),
+        "songs_locked_in_time": mean_in_time("lock_s"),
+        "songs_within_f_gap": mean_in_gap("f_online", "f_offline"),
         "f_online": mean_f("f_online"),
         "joining_mid_song": {
-            "songs_locked_in_time": mean_count("join_lock_s", in_time),
-            "songs_within_f_gap": mean_count("join_f_online", in_gap("join_f_offline")),
+            "songs_locked_in_time": mean_in_time("join_lock_s"),
+            "songs_within_f_gap": mean_in_gap("join_f_online", "join_f_offline"),
             "f_online": mean_f("join_f_online"),
         },
     }
@@ -622,10 +632,10 @@ def bench_live_tracker(
         }
 
     def in_time(key: str) -> str:
-        return f"{sum(1 for r in rows if r[key] is not None and r[key] <= GOAL_LOCK_S)}/{len(rows)}"
+        return f"{sum(_in_time(r[key]) for r in rows)}/{len(rows)}"
 
     def in_gap(key: str) -> str:
-        return f"{sum(1 for r in rows if r[key] >= -GOAL_F_GAP)}/{len(rows)}"
+        return f"{sum(_in_gap(r[key]) for r in rows)}/{len(rows)}"
 
     return {
         "benchmark": "live_tracker",

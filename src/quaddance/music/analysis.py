@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import itertools
 import json
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -277,7 +278,7 @@ def _features(y: np.ndarray, sr: int, cfg: AnalysisConfig) -> _Features:
 # --- tempo ------------------------------------------------------------------------------------
 
 
-def _autocorrelation(x: np.ndarray, max_lag: int, demean: bool = True) -> np.ndarray:
+def autocorrelation(x: np.ndarray, max_lag: int, demean: bool = True) -> np.ndarray:
     """(max_lag + 1,) unbiased autocorrelation (divided by the overlap length), lag 0 = 1."""
     if demean:
         x = x - x.mean()
@@ -288,8 +289,9 @@ def _autocorrelation(x: np.ndarray, max_lag: int, demean: bool = True) -> np.nda
     return ac / max(ac[0], 1e-12)
 
 
-def _harmonic_salience(ac: np.ndarray, lags: np.ndarray, n_harmonics: int) -> np.ndarray:
-    """Mean autocorrelation at 1, 2, ... ``n_harmonics`` times each lag (frames).
+def harmonic_salience(ac: np.ndarray, lags: np.ndarray, multiples: Iterable[int]) -> np.ndarray:
+    """Mean autocorrelation ``ac`` at the ``multiples`` of each lag (frames) within its range
+    (1, 2, ... ``tempo_harmonics`` for the tempo's salience).
 
     A true beat period repeats at all its multiples; a period of 1.5 beats (the usual
     "2/3 tempo" error) lines up with the beats only at every other multiple, so it scores lower.
@@ -297,7 +299,7 @@ def _harmonic_salience(ac: np.ndarray, lags: np.ndarray, n_harmonics: int) -> np
     idx = np.arange(len(ac))
     total = np.zeros(len(lags))
     count = np.zeros(len(lags))
-    for k in range(1, n_harmonics + 1):
+    for k in multiples:
         ok = k * lags <= idx[-1]
         total[ok] += np.interp(k * lags[ok], idx, ac)
         count[ok] += 1
@@ -314,13 +316,13 @@ def _global_tempo(onset: np.ndarray, fps: float, cfg: AnalysisConfig) -> float:
     """Main tempo, BPM: the lag whose harmonics carry the most autocorrelation, times the prior."""
     n_harmonics = cfg.tempo_harmonics
     max_lag = min(len(onset) - 1, int(n_harmonics * fps * 60.0 / cfg.min_bpm) + 2)
-    ac = _autocorrelation(onset, max_lag)
+    ac = autocorrelation(onset, max_lag)
     # Quarter-frame lag steps: at 43 frames/s a whole frame is 4 % of a 120 BPM period.
     lags = np.arange(fps * 60.0 / cfg.max_bpm, min(fps * 60.0 / cfg.min_bpm, max_lag), 0.25)
     if len(lags) == 0:
         return cfg.prior_center_bpm
     bpm = 60.0 * fps / lags
-    score = _harmonic_salience(ac, lags, n_harmonics) * _prior(bpm, cfg)
+    score = harmonic_salience(ac, lags, range(1, n_harmonics + 1)) * _prior(bpm, cfg)
     return float(bpm[int(np.argmax(score))])
 
 
@@ -347,12 +349,12 @@ def _local_period(
     window = np.hanning(win)
     # The window's own autocorrelation falls with lag and would pull the peaks to shorter lags
     # (faster tempi, by about 1 %); dividing by it removes that bias.
-    window_ac = _autocorrelation(window, max_lag, demean=False)
+    window_ac = autocorrelation(window, max_lag, demean=False)
     emis = np.zeros((len(centers), len(periods)))
     for k, c in enumerate(centers):
         seg = onset[c - win // 2 : c - win // 2 + win]
-        ac = _autocorrelation((seg - seg.mean()) * window, max_lag) / np.maximum(window_ac, 0.05)
-        emis[k] = _harmonic_salience(ac, periods, cfg.tempo_harmonics)
+        ac = autocorrelation((seg - seg.mean()) * window, max_lag) / np.maximum(window_ac, 0.05)
+        emis[k] = harmonic_salience(ac, periods, range(1, cfg.tempo_harmonics + 1))
     emis = emis / (np.abs(emis).max(axis=1, keepdims=True) + 1e-9)
     # Staying near the global tempo is preferred: a change has to be clear to be followed.
     emis -= cfg.tempo_deviation_cost * (log_ratio / np.log(2.0)) ** 2

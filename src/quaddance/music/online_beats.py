@@ -95,8 +95,10 @@ import numpy as np
 from quaddance.music.analysis import (
     SWING_FRACTIONS,
     AnalysisConfig,
+    autocorrelation,
     backbeat_heard,
     beat_profile,
+    harmonic_salience,
     offbeat_harmony,
     swing_shift,
 )
@@ -398,16 +400,6 @@ class TrackerState:
             return float("nan")
         beats_to_go = (BEATS_PER_BAR - self.next_beat_in_bar) % BEATS_PER_BAR
         return self.next_beat_s + beats_to_go * self.beat_period_s
-
-
-def _autocorrelation(x: np.ndarray, max_lag: int, demean: bool = True) -> np.ndarray:
-    """(max_lag + 1,) autocorrelation divided by the overlap length, lag 0 scaled to 1."""
-    if demean:
-        x = x - x.mean()
-    spec = np.fft.rfft(x, 2 * len(x))
-    ac = np.fft.irfft(np.abs(spec) ** 2)[: max_lag + 1]
-    ac /= np.maximum(len(x) - np.arange(max_lag + 1), 1)
-    return ac / max(float(ac[0]), 1e-12)
 
 
 def _steady(periods: list[float]) -> bool:
@@ -883,18 +875,10 @@ class _Listener:
         # that a tempo change shows within a few seconds; dividing by the window's own
         # autocorrelation removes its pull towards short lags.
         window = np.hanning(2 * span + 1)[1 : span + 1][-len(onset) :]
-        ac = _autocorrelation((onset - onset.mean()) * window, max_lag)
-        ac /= np.maximum(_autocorrelation(window, max_lag, demean=False), 0.05)
-        sal = np.zeros(len(periods))
-        count = np.zeros(len(periods))
-        lags = np.arange(max_lag + 1)
-        for k in range(1, TEMPO_HARMONICS + 1):
-            ok = k * periods <= max_lag
-            sal[ok] += np.interp(k * periods[ok], lags, ac)
-            count[ok] += 1
-        sal = sal / np.maximum(count, 1)
-        raw_sal = sal
-        sal = sal * self._prior
+        ac = autocorrelation((onset - onset.mean()) * window, max_lag)
+        ac /= np.maximum(autocorrelation(window, max_lag, demean=False), 0.05)
+        raw_sal = harmonic_salience(ac, periods, range(1, TEMPO_HARMONICS + 1))
+        sal = raw_sal * self._prior
         emis = sal / max(float(np.abs(sal).max()), 1e-9)
         if self._viterbi is None:
             self._viterbi = emis
@@ -912,7 +896,7 @@ class _Listener:
             # level (the best tempo near it), as a dancer keeps the step tempo it chose. A real
             # tempo change (other ratios) or a lost lock lets the filter's best through.
             best = self._at_level(best, np.log(60.0 * self._fps / self._period), held)
-        if self._three_four(ac, float(periods[best]), max_lag):
+        if self._three_four(ac, float(periods[best])):
             # Below the tempo range, the same beats at twice the rate (3/2 of the filter's).
             slow = self._log_bpm[best] - np.log(THREE_FOUR)
             best = self._best_near(slow if slow >= np.log(MIN_BPM) else slow + np.log(2.0))
@@ -964,20 +948,16 @@ class _Listener:
             self._doubled = self._slowed = False
         return best
 
-    def _three_four(self, ac: np.ndarray, period: float, max_lag: int) -> bool:
+    def _three_four(self, ac: np.ndarray, period: float) -> bool:
         """Whether ``period`` (frames) has been 3/4 of the beat at `THREE_FOUR_VOTES` tempo
         estimates in a row, this one included: the autocorrelation ``ac`` at 2 and 4 periods of
         4/3 ``period`` beats that at 2 and 4 of ``period`` by `THREE_FOUR_MARGIN`."""
         slow = THREE_FOUR * period
-        if 2 * slow > max_lag:
+        if 2 * slow > len(ac) - 1:
             self._three_four_votes = 0
             return False
-        lags = np.arange(len(ac))
-
-        def bars(p: float) -> float:
-            return float(np.mean([np.interp(k * p, lags, ac) for k in (2, 4) if k * p <= max_lag]))
-
-        if bars(slow) - bars(period) <= THREE_FOUR_MARGIN:
+        bars = harmonic_salience(ac, np.array([slow, period]), (2, 4))  # half bar and bar
+        if bars[0] - bars[1] <= THREE_FOUR_MARGIN:
             self._three_four_votes = 0
             return False
         self._three_four_votes += 1
