@@ -754,6 +754,31 @@ def test_bench_live_joins_songs_mid_song_between_beats() -> None:
     assert np.min(np.abs(beats - join_s)) > 0.3 * 0.5  # not on a beat
 
 
+def test_bench_live_scores_each_part_of_a_song_with_a_break_at_its_own_level() -> None:
+    """Across a silent break the tracker forgets the tempo, so each part is scored at its own
+    metrical level (double time before the break and the beat after it is a perfect score),
+    after the lock, and the parts' F are weighted by their beats; a song without a break is
+    scored as `metrical_level_f_measure` scores it."""
+    from quaddance.bench.beats import metrical_level_f_measure
+    from quaddance.bench.live import _f_after
+
+    part1 = np.arange(0.5, 14.0, 0.6)  # 100 BPM, then a break at 14-16 s
+    part2 = np.arange(16.0, 30.0, 0.5)  # 120 BPM
+    ref = np.concatenate([part1, part2])
+    double1 = np.arange(0.5, 14.0, 0.3)
+    est = np.concatenate([double1, part2])
+    assert _f_after(ref, est, 0.0, (0.0, 16.0)) == pytest.approx(1.0)
+    assert metrical_level_f_measure(ref, est) < 0.9  # one level for the whole song
+    # Part 2 at the wrong phase (off-beats): weighted by beats, after the lock at 5.2 s.
+    off2 = part2 + 0.25
+    est = np.concatenate([double1, off2])
+    n1, n2 = np.sum(part1 >= 5.2), len(part2)
+    assert _f_after(ref, est, 5.2, (0.0, 16.0)) == pytest.approx(n1 / (n1 + n2))
+    assert _f_after(ref, est, 5.2) == pytest.approx(
+        metrical_level_f_measure(ref[ref >= 5.2], est[est >= 5.2])
+    )
+
+
 def test_bench_live_tuning_additions_are_new_songs() -> None:
     """The songs `bench live` adds to its tuning set are other songs than those of the sets it
     reports (no name, and no tempo + rhythms + seed, shared with the untuned or random sets),
