@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import soundfile as sf
+from dance_keys import DANCE_METRIC_KEYS
 from test_whole_body_sim import check_rollout_and_body_metrics
 
 from quaddance.errors import InputFileError, QuaddanceError
@@ -18,16 +19,6 @@ from quaddance.music.synth import render_song
 from quaddance.play.dance import DanceJob, run_dance
 from quaddance.play.policy import OnnxPolicy, shipped_policy_path
 
-METRIC_KEYS = {
-    "duration_s",
-    "falls_s",
-    "front",
-    "rear_lift_mean_m",
-    "rear_lift_max_m",
-    "bas",
-    "realtime_factor_sim",
-    "realtime_factor_render",
-}
 FOOT_KEYS = {"mae_m", "mae_feasible_m", "corr", "corr_feasible"}
 
 
@@ -54,7 +45,7 @@ def test_dance_writes_video_plot_and_complete_metrics(short_song, tmp_path):
 
     out = run_dance(DanceJob(out_dir=tmp_path, song=short_song, width=320, height=240))
     metrics = json.loads((tmp_path / "metrics.json").read_text())
-    assert set(metrics) >= METRIC_KEYS
+    assert set(metrics) >= DANCE_METRIC_KEYS
     assert set(metrics["front"]) == {"fl", "fr"}
     for foot in ("fl", "fr"):
         assert set(metrics["front"][foot]) >= FOOT_KEYS

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import soundfile as sf
 import torch
+from dance_keys import DANCE_METRIC_KEYS
 from typer.testing import CliRunner
 
 from quaddance.cli import app
@@ -24,15 +25,7 @@ from quaddance.play.policy import OnnxPolicy, shipped_policy_path
 from quaddance.play.rollout import PinnedDynamics, playback_env, rollout
 from quaddance.sim import go1
 
-METRICS_JSON_KEYS = {
-    "duration_s",
-    "falls_s",
-    "front",
-    "rear_lift_mean_m",
-    "rear_lift_max_m",
-    "bas",
-    "realtime_factor_sim",
-    "realtime_factor_render",
+METRICS_JSON_KEYS = DANCE_METRIC_KEYS | {
     "source",
     "policy",
     "mode",
