@@ -1,5 +1,6 @@
-"""The keys of `play.metrics.dance_metrics`'s result, which `dance`'s ``metrics.json`` and
-`eval`'s report items carry too: one list for the tests that check them."""
+"""The keys of `play.metrics.dance_metrics`'s result and of each front paw's entry in it,
+which `dance`'s ``metrics.json`` and `eval`'s report items carry too: one list for the tests
+that check them."""
 
 DANCE_METRIC_KEYS = frozenset(
     {
@@ -13,3 +14,6 @@ DANCE_METRIC_KEYS = frozenset(
         "realtime_factor_render",
     }
 )
+
+DANCE_FOOT_KEYS = frozenset({"mae_m", "mae_feasible_m", "corr", "corr_feasible"})
+"""The keys of each front paw's entry under ``front``."""

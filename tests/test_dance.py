@@ -11,15 +11,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 import soundfile as sf
-from dance_keys import DANCE_METRIC_KEYS
+from dance_keys import DANCE_FOOT_KEYS, DANCE_METRIC_KEYS
 from test_whole_body_sim import check_rollout_and_body_metrics
 
 from quaddance.errors import InputFileError, QuaddanceError
 from quaddance.music.synth import render_song
 from quaddance.play.dance import DanceJob, run_dance
 from quaddance.play.policy import OnnxPolicy, shipped_policy_path
-
-FOOT_KEYS = {"mae_m", "mae_feasible_m", "corr", "corr_feasible"}
 
 
 @pytest.fixture(scope="module")
@@ -48,7 +46,7 @@ def test_dance_writes_video_plot_and_complete_metrics(short_song, tmp_path):
     assert set(metrics) >= DANCE_METRIC_KEYS
     assert set(metrics["front"]) == {"fl", "fr"}
     for foot in ("fl", "fr"):
-        assert set(metrics["front"][foot]) >= FOOT_KEYS
+        assert set(metrics["front"][foot]) >= DANCE_FOOT_KEYS
         assert metrics["front"][foot]["mae_m"] is not None
     assert metrics["duration_s"] == pytest.approx(4.0, abs=0.05)
     assert metrics["realtime_factor_render"] is not None

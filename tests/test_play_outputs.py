@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from dance_keys import DANCE_METRIC_KEYS
+from dance_keys import DANCE_FOOT_KEYS, DANCE_METRIC_KEYS
 
 from quaddance.errors import InputFileError, QuaddanceError
 from quaddance.play import metrics, plots
@@ -95,7 +95,7 @@ def test_dance_metrics_values_and_keys() -> None:
     assert set(m) == DANCE_METRIC_KEYS
     assert set(m["front"]) == {"fl", "fr"}
     for foot in ("fl", "fr"):
-        assert set(m["front"][foot]) == {"mae_m", "mae_feasible_m", "corr", "corr_feasible"}
+        assert set(m["front"][foot]) == DANCE_FOOT_KEYS
     assert m["duration_s"] == pytest.approx(4.0)
     assert m["falls_s"] == [3.2]
     fl, fr = m["front"]["fl"], m["front"]["fr"]
