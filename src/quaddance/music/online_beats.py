@@ -207,12 +207,9 @@ BURSTY_S = 3.0
 BURSTY_CV = 0.36
 """Either lock (item 4) also needs the full-band flux of the last ``BURSTY_S`` to vary by this
 coefficient of variation (std / mean) at least: music's flux comes in bursts, steady noise's
-does not. Over 3 s, white, pink and brown noise stayed at or below 0.31 (9 clips); per tuning
-song, the 5th percentile over the song is 0.5-3 (median 1.7). Measured in session 26: noise
-clips that lock, 63 of 72 without the test, 0 of 72 with it (and 0 of 120 more, of seeds not
-used to choose it); the tuning set's figures unchanged, song by song; half the tuning songs
-with pink noise added at 10 dB below the music: 32 of 34 locked in time either way (F 0.818),
-at 0 dB (noise as loud as the music): 14 instead of 30 (with 0.45: 8)."""
+does not. Over 3 s, white, pink and brown noise stayed at or below 0.31; per tuning
+song, the 5th percentile over the song is 0.5-3 (median 1.7), so noise clips do not lock
+while music with noise 10 dB down still does."""
 SUPPORT_RADIUS = 3
 """A beat is supported by an onset peak within this many frames (+-35 ms)."""
 UNLOCK_MISSES = 4
@@ -230,16 +227,9 @@ THREE_FOUR_VOTES = 2
 """The three-four test (item 2): the tempo moves to 3/4 of the filter's (to 3/2 where 3/4
 falls below ``MIN_BPM``: the same beats twice as fast) when the autocorrelation at 2 and 4
 periods of the slower tempo exceeds that at 2 and 4 of its own by ``THREE_FOUR_MARGIN`` at
-``THREE_FOUR_VOTES`` tempo estimates in a row. Measured in session 27 on the tuning set (the
-first listener's estimates from the songs' start, the second's joined mid-song): at a tempo
-right to within a metrical level of 2, the margin was passed at 2 of 8347 estimates, never
-twice in a row; at 4/3, 2/3 or 8/3 of the beat's tempo, at 12 % of the estimates before the
-lock. Tuning set from the start: 65 -> 66 of 67 locked in time, 57 -> 59 within 0.1 of the
-offline F (F 0.897 -> 0.918; `funk_104_sync` 0.41 -> 1.00, `tune_clave_100` 0.22 -> 0.98);
-joined mid-song 64 -> 65 and 55 -> 56 (F 0.830 -> 0.844); no song worse by more than 0.05.
-Averaged over 4 shifts within a frame (`bench live --tracker-only --sets tuning --shifts
-4`): from the start 65.0 -> 66.0 and 55.25 -> 56.5, F 0.880 -> 0.897 (higher at each
-shift); joined 64.5 -> 64.75 and 53.0 -> 53.25."""
+``THREE_FOUR_VOTES`` tempo estimates in a row. On the tuning set, at a tempo right to within a
+metrical level of 2 the margin was passed at 2 of 8347 estimates, never twice in a row; at
+4/3, 2/3 or 8/3 of the beat's tempo, at 12 % of the estimates before the lock."""
 BACKBEAT_PERIODS = 4
 BACKBEAT_MIN_PERIODS = 3
 """Beat periods of the recent music that the backbeat test (item 2) folds together: the last
