@@ -1,4 +1,5 @@
-"""Song or motion file -> `Dance`; and a bank of synthetic target sequences for training.
+"""Song or motion file -> `Dance` (and the ``choreograph`` command's job and tables); and a
+bank of synthetic target sequences for training.
 
 `make_dance` imports the audio stack only when it has a song to analyse; `target_bank` never
 does, so it runs on a training machine without librosa.
@@ -17,9 +18,11 @@ import quaddance
 from quaddance.choreo.body import MoveSet, choreograph_body
 from quaddance.choreo.choreographer import STYLES, choreograph
 from quaddance.choreo.grid import MusicGrid, synthetic_grid
-from quaddance.dancefile import Dance
-from quaddance.errors import QuaddanceError
+from quaddance.dancefile import Dance, save_dance
+from quaddance.errors import InputFileError, QuaddanceError
+from quaddance.fileio import check_output_file
 from quaddance.targets import (
+    BODY_COLUMNS,
     TargetConfig,
     TargetMode,
     feasible_body_targets,
@@ -174,3 +177,128 @@ def target_bank(
         if progress is not None:
             progress(i)
     return bank
+
+
+@dataclasses.dataclass(frozen=True)
+class ChoreographJob:
+    """A dance to make and save (``quaddance choreograph``).
+
+    Attributes:
+        song: audio file, or None with ``motion``.
+        motion: human motion file to dance instead of the choreographer's, or None.
+        out: where to write the dance (.npz); unused with ``check``.
+        mode: target mode (`quaddance.targets.MODES`).
+        h0_m: paper mode's h0 (eq. 4), m.
+        scale: minmax mode's scale s.
+        max_height_m: feasible mode's highest front-foot target, m; None: `TargetConfig`'s.
+        seed: choreographer seed.
+        style: choreographer style.
+        moves: TOML file of extra body moves and styles, or None.
+        check: only make the dance (to report what feasible targets clamp); write nothing.
+    """
+
+    song: Path | None
+    motion: Path | None
+    out: Path
+    mode: TargetMode = "feasible"
+    h0_m: float = 2.0
+    scale: float = 1.0
+    max_height_m: float | None = None
+    seed: int = 0
+    style: str = "mixed"
+    moves: Path | None = None
+    check: bool = False
+
+
+def run_choreograph(job: ChoreographJob) -> tuple[Dance, Analysis | None]:
+    """Make ``job``'s dance with `make_dance` and save it to ``job.out`` (unless ``job.check``).
+
+    The inputs, the moves file and the output path are checked before the work, so that a bad
+    one fails in a moment. Returns the dance and the song's analysis (None without a song).
+    """
+    for path in (job.song, job.motion):
+        if path is not None and not path.is_file():
+            raise InputFileError(path, "no such file")
+    move_set = None
+    if job.moves is not None:
+        from quaddance.choreo.moves_file import load_moves
+
+        move_set = load_moves(job.moves)
+    if not job.check:
+        check_output_file(job.out)
+    cfg = TargetConfig(mode=job.mode, h0_m=job.h0_m, scale=job.scale)
+    if job.max_height_m is not None:
+        cfg = dataclasses.replace(cfg, max_height_m=job.max_height_m)
+    dance, analysis = make_dance(
+        job.song,
+        job.motion,
+        mode=job.mode,
+        seed=job.seed,
+        target_cfg=cfg,
+        style=job.style,
+        moves=move_set,
+    )
+    if not job.check:
+        save_dance(job.out, dance)
+    return dance, analysis
+
+
+def dance_table(dance: Dance, analysis: Analysis | None, out: Path) -> Any:
+    """A rich table that sums up a dance saved to ``out``: source, length, tempo, front-paw
+    lifts and heights, and the trunk's range."""
+    from rich.table import Table
+
+    front = dance.targets_m[:, :2]
+    up = front > 0
+    n_lifts = [
+        int(np.count_nonzero(np.diff(up[:, k].astype(np.int8)) == 1) + up[0, k]) for k in (0, 1)
+    ]
+    table = Table(title=f"dance -> {out}", show_header=False)
+    table.add_row("source", dance.source)
+    table.add_row("duration", f"{dance.duration_s:.1f} s at {dance.fps:g} Hz")
+    if analysis is not None:
+        table.add_row("tempo", f"{analysis.tempo_bpm:.1f} BPM, {dance.beats_s.size} beats")
+    table.add_row("mode", dance.mode)
+    table.add_row("lifts FL / FR", f"{n_lifts[0]} / {n_lifts[1]}")
+    table.add_row("highest target", f"{front.max():.3f} m")
+    table.add_row("a front foot up", f"{100 * up.any(axis=1).mean():.0f} % of the time")
+    table.add_row("both front feet up", f"{100 * up.all(axis=1).mean():.0f} % of the time")
+    body = dance.body_targets
+    table.add_row(
+        "trunk range",
+        f"height {body[:, 0].min():+.3f}..{body[:, 0].max():+.3f} m, roll/pitch/yaw "
+        + " / ".join(f"{np.rad2deg(np.ptp(body[:, c])):.0f}" for c in (1, 2, 3))
+        + " deg",
+    )
+    return table
+
+
+def clamp_table(dance: Dance) -> Any:
+    """A rich table of ``dance.clamp_report`` (`make_dance`): what feasible targets clamped
+    (paw lifts dropped, merged or clipped; trunk samples per body column), and by how much."""
+    from rich.table import Table
+
+    report = dance.clamp_report or {}
+    paw = report.get("paw", {})
+    table = Table(title=f"clamp check: {dance.source}")
+    for name in ("what", "clamped", "max", "mean"):
+        table.add_column(name)
+    table.add_row(
+        "paw lifts",
+        f"{paw.get('human_lifts', 0)} human -> {paw.get('robot_lifts', 0)} robot "
+        f"({paw.get('dropped_or_merged', 0)} dropped or merged)",
+        f"{paw.get('clipped_to_max_height', 0)} clipped to {paw.get('max_height_m', 0):.2f} m",
+        f"highest {paw.get('highest_target_m', 0):.3f} m",
+    )
+    body = report.get("body", {})
+    n = max(int(body.get("samples", 0)), 1)
+    for name in BODY_COLUMNS:
+        col = body.get(name, {"clamped": 0, "max": 0.0, "mean": 0.0})
+        unit, scale = ("m", 1.0) if name.endswith("_m") else ("deg", float(np.rad2deg(1.0)))
+        table.add_row(
+            f"body {name}",
+            f"{col['clamped']} samples ({100 * col['clamped'] / n:.0f} %)",
+            f"{col['max'] * scale:.3f} {unit}",
+            f"{col['mean'] * scale:.4f} {unit}",
+        )
+    return table

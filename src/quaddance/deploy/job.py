@@ -140,3 +140,16 @@ def run_deploy(job: DeployJob, status: Callable[[str], None] = lambda m: None) -
         result = runner.run()
     paths = write_outputs(out, result, policy, dance.beats_s)
     return result.summary, paths
+
+
+def summary_line(summary: dict) -> str:
+    """One line for a person from deploy.json's contents: the final state, the time danced,
+    falls, the front paws' tracking error and the tick time."""
+    front = summary["front"] or {}
+    mae = [front[f]["mae_m"] for f in ("fl", "fr") if f in front and front[f]["mae_m"] is not None]
+    return (
+        f"final state {summary['final_state']}, danced {summary['duration_s']:.1f} s, "
+        f"falls {summary['falls']}, front MAE "
+        + (f"{100 * sum(mae) / len(mae):.1f} cm" if mae else "n/a")
+        + f", tick p99 {summary['tick_ms']['p99']} ms"
+    )

@@ -402,3 +402,16 @@ def _video(path: Path, rollout, log: dict, song: Path, start_s: float = 0.0) -> 
         None, qpos, rollout.fps, path, audio_path=song, audio_offset_s=start_s, progress=False
     )
     return path
+
+
+def summary_line(summary: dict) -> str:
+    """One line for a person from live.json's contents: the time danced, falls, the beat
+    lock, latency and loop time."""
+    lock = summary["lock_s"]
+    return (
+        f"danced {summary['duration_s']:.1f} s, falls {summary['falls']}, "
+        + (f"beat locked at {lock:.1f} s" if lock is not None else "no beat lock")
+        + f", {len(summary['beats_s'])} beats, latency p50/p99 "
+        f"{summary['latency_ms']['p50']} / {summary['latency_ms']['p99']} ms, "
+        f"loop p99 {summary['loop_ms']['p99']} ms"
+    )

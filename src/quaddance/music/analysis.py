@@ -150,6 +150,15 @@ class Analysis:
             "source": self.source,
         }
 
+    def summary(self) -> str:
+        """One line for a person: length, tempo, beats, bars and where the sections start."""
+        starts = ", ".join(f"{t:.1f}" for t in self.sections_s)
+        return (
+            f"{self.duration_s:.1f} s, tempo {self.tempo_bpm:.1f} BPM, "
+            f"{self.beats_s.size} beats, {self.downbeats_s.size} bars, "
+            f"{self.sections_s.size} sections (starting at {starts} s)"
+        )
+
     def save_json(self, path: str | Path) -> None:
         """Write the analysis as JSON, atomically."""
         from quaddance.fileio import write_json

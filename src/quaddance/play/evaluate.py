@@ -180,6 +180,16 @@ def summarize(rows: Sequence[dict[str, Any]]) -> dict[str, float | None]:
     }
 
 
+def summary_line(rows: Sequence[dict[str, Any]]) -> str:
+    """One line for a person from `summarize`: items, falls, front-paw tracking, rear lift."""
+    s = summarize(rows)
+    return (
+        f"{s['items']} items, {s['falls']} falls; feasible MAE "
+        f"{100 * (s['mae_feasible_m'] or 0):.1f} cm, corr {s['corr_feasible'] or 0:.2f}; rear lift "
+        f"{100 * (s['rear_lift_mean_m'] or 0):.1f} cm mean"
+    )
+
+
 def _body(row: dict[str, Any], column: str, key: str) -> float | None:
     return ((row.get("body") or {}).get(column) or {}).get(key)
 

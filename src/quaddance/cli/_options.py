@@ -1,0 +1,46 @@
+"""Options and checks that several commands share: a bad value is a usage error (exit 2)
+naming the option."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+SongArg = Annotated[Path, typer.Argument(help="Audio file: wav, flac, ogg or mp3.")]
+
+SEED_MAX = 2**32 - 1
+"""Largest seed accepted (numpy's and torch's generators take 0 ... 2**32 - 1 everywhere)."""
+SeedRange = {"min": 0, "max": SEED_MAX}
+
+PolicyOpt = Annotated[
+    Path | None, typer.Option(help="Policy .onnx (its .json beside it); default: shipped.")
+]
+RobotOpt = Annotated[
+    str, typer.Option(help="sim (a simulated Go1 in another process) or go1 (a real one).")
+]
+RobotIpOpt = Annotated[str, typer.Option(help="go1: the robot's low-level IP.")]
+PowerLevelOpt = Annotated[
+    int, typer.Option(help="go1: SDK PowerProtect level, 1 (10 %) to 10.", min=1, max=10)
+]
+MovesOpt = Annotated[
+    Path | None,
+    typer.Option(help="TOML file of extra body moves and styles (see choreo/moves_file.py)."),
+]
+
+
+def finite_in(lo: float, hi: float):
+    """Option callback: the value (or each value of a list) is finite and in [lo, hi].
+
+    click's FloatRange lets NaN through (every comparison with NaN is false), hence this.
+    """
+
+    def check(value):
+        for v in value if isinstance(value, list | tuple) else [value]:
+            if v is not None and not (math.isfinite(v) and lo <= v <= hi):
+                raise typer.BadParameter(f"{v} is not a finite number in [{lo:g}, {hi:g}]")
+        return value
+
+    return check

@@ -1,0 +1,73 @@
+"""The ``deploy`` command: a dance on a robot (simulated or real) with the safety layer."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from quaddance.cli._options import PolicyOpt, PowerLevelOpt, RobotIpOpt, RobotOpt, finite_in
+
+
+def deploy_cmd(
+    song: Annotated[
+        Path | None, typer.Argument(help="Audio file (or --demo, --dance, --motion).")
+    ] = None,
+    demo: Annotated[bool, typer.Option(help="Dance to the built-in demo song.")] = False,
+    dance: Annotated[
+        Path | None, typer.Option("--dance", help="A dance.npz (quaddance choreograph).")
+    ] = None,
+    motion: Annotated[
+        Path | None, typer.Option(help="Human motion (EDGE/AIST++ .pkl, .bvh) to dance.")
+    ] = None,
+    robot: RobotOpt = "sim",
+    policy: PolicyOpt = None,
+    seconds: Annotated[
+        float | None,
+        typer.Option(help="Dance at most this long, s.", callback=finite_in(0.02, 3600.0)),
+    ] = None,
+    auto_start: Annotated[
+        bool, typer.Option("--auto-start", help="Dance once standing, without waiting for Enter.")
+    ] = False,
+    inject: Annotated[
+        list[str] | None,
+        typer.Option(help="Fault at dance time T, s (sim only): push@T, freeze@T, nan@T, lag@T."),
+    ] = None,
+    out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")] = Path("deploy_out"),
+    robot_ip: RobotIpOpt = "192.168.123.10",
+    power_level: PowerLevelOpt = 1,
+    sim_latency_ms: Annotated[
+        tuple[float, float],
+        typer.Option(
+            help="sim: sensor-to-motor delay range, ms (drawn per message).",
+            callback=finite_in(0.0, 500.0),
+        ),
+    ] = (5.0, 20.0),
+) -> None:
+    """Run the dance on a robot: passive -> soft stand -> ready -> dance -> done, with a safety
+    layer (damping on a fall, a stale or NaN state, Ctrl-C); writes deploy.json and log.npz."""
+    from rich.console import Console
+
+    from quaddance.deploy.job import DeployJob, parse_inject, run_deploy, summary_line
+
+    console = Console(stderr=True)
+    job = DeployJob(
+        out_dir=out,
+        robot=robot,
+        song=song,
+        motion=motion,
+        dance=dance,
+        demo=demo,
+        policy=policy,
+        seconds=seconds,
+        auto_start=auto_start,
+        inject=parse_inject(inject),
+        robot_ip=robot_ip,
+        power_level=power_level,
+        sim_latency_ms=sim_latency_ms,
+    )
+    summary, paths = run_deploy(job, status=lambda msg: console.log(msg))
+    console.print(summary_line(summary))
+    for name, path in paths.items():
+        console.print(f"{name}: {path}")

@@ -1,0 +1,96 @@
+"""The ``live`` command: dance to music as it plays (microphone or a file at real-time pace)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from quaddance.cli._options import (
+    PolicyOpt,
+    PowerLevelOpt,
+    RobotIpOpt,
+    RobotOpt,
+    SeedRange,
+    finite_in,
+)
+
+
+def live_cmd(
+    from_file: Annotated[
+        Path | None,
+        typer.Option(
+            "--from-file",
+            help="Feed this song through the live path at real-time pace (default: microphone).",
+        ),
+    ] = None,
+    start: Annotated[
+        float,
+        typer.Option(
+            "--start",
+            help="With --from-file: play from this far into the song, s, as music already "
+            "playing (times in the outputs count from there).",
+            callback=finite_in(0.0, 36000.0),
+        ),
+    ] = 0.0,
+    device: Annotated[
+        str | None, typer.Option(help="Microphone or line-in (sounddevice name or index).")
+    ] = None,
+    robot: RobotOpt = "sim",
+    policy: PolicyOpt = None,
+    seconds: Annotated[
+        float | None,
+        typer.Option(
+            help="Dance this long, s (default: the file's length; 60 s from a microphone).",
+            callback=finite_in(0.5, 3600.0),
+        ),
+    ] = None,
+    viewer: Annotated[
+        bool, typer.Option("--viewer", help="Serve a web page showing the robot, tempo, beats.")
+    ] = False,
+    host: Annotated[
+        str, typer.Option(help="Viewer address; 0.0.0.0 lets other machines watch.")
+    ] = "127.0.0.1",
+    port: Annotated[int, typer.Option(help="Viewer port.", min=1, max=65535)] = 8080,
+    video: Annotated[
+        bool, typer.Option("--video", help="With --from-file: write dance.mp4 afterwards.")
+    ] = False,
+    style: Annotated[str, typer.Option(help="Choreography style.")] = "mixed",
+    seed: Annotated[int, typer.Option(help="Choreography seed.", **SeedRange)] = 0,
+    out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")] = Path("live_out"),
+    robot_ip: RobotIpOpt = "192.168.123.10",
+    power_level: PowerLevelOpt = 1,
+) -> None:
+    """Dance to music as it plays: online beat tracking, a dance planned a bar ahead, the
+    robot on the wall clock (same runner and safety layer as deploy). Writes live.json,
+    rollout.npz, deploy.json and log.npz (and dance.mp4 with --video)."""
+    from rich.console import Console
+
+    from quaddance.choreo.choreographer import STYLES
+    from quaddance.live.session import LiveJob, run_live, summary_line
+
+    if style not in STYLES:
+        raise typer.BadParameter(f"--style must be one of {', '.join(sorted(STYLES))}")
+    console = Console(stderr=True)
+    job = LiveJob(
+        out_dir=out,
+        from_file=from_file,
+        start_s=start,
+        device=device,
+        robot=robot,
+        policy=policy,
+        seconds=seconds,
+        viewer=viewer,
+        host=host,
+        port=port,
+        video=video,
+        seed=seed,
+        style=style,
+        robot_ip=robot_ip,
+        power_level=power_level,
+    )
+    summary, paths = run_live(job, status=lambda msg: console.log(msg))
+    console.print(summary_line(summary))
+    for name, path in paths.items():
+        console.print(f"{name}: {path}")

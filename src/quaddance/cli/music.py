@@ -1,0 +1,46 @@
+"""Music commands: ``analyze`` (a song -> analysis JSON) and ``demo-song``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from quaddance.cli._options import SongArg
+
+
+def analyze_cmd(
+    song: SongArg,
+    out: Annotated[
+        Path, typer.Option("--out", "-o", help="Where to write the analysis JSON.")
+    ] = Path("analysis.json"),
+) -> None:
+    """Find the tempo, beats, downbeats, sections and envelopes of a song; write them as JSON."""
+    from rich.console import Console
+
+    from quaddance.fileio import check_output_file
+    from quaddance.music.analysis import analyze_file
+
+    check_output_file(out)  # before the work, not after it
+    with Console(stderr=True).status(f"Analysing {song.name}..."):
+        analysis = analyze_file(song)
+    analysis.save_json(out)
+    print(f"{song.name}: {analysis.summary()} -> {out}")
+
+
+def demo_song_cmd(
+    out: Annotated[Path, typer.Argument(help="Where to write the song (wav, flac or ogg).")] = Path(
+        "demo_song.wav"
+    ),
+) -> None:
+    """Write the built-in demo song: 30 s at 118 BPM, drums, bass and chords, made by code."""
+    from quaddance.music.synth import write_demo_song
+
+    if out.suffix.lower() not in (".wav", ".flac", ".ogg"):
+        raise typer.BadParameter(f"OUT must end in .wav, .flac or .ogg, got {out.name!r}")
+    truth = write_demo_song(out)
+    print(
+        f"demo song: {truth.duration_s:.0f} s, {truth.tempo_bpm:g} BPM, {truth.beats_s.size} beats,"
+        f" section change at {truth.section_change_s[0]:.2f} s -> {out}"
+    )

@@ -1,0 +1,146 @@
+"""The ``train`` command: PPO on the dance task; exports the policy."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from quaddance.cli._options import SeedRange, finite_in
+
+
+def train_cmd(
+    engine: Annotated[
+        str, typer.Option(help="Physics: cpu (native MuJoCo) or gpu (MuJoCo Warp).")
+    ] = "cpu",
+    num_envs: Annotated[
+        int | None, typer.Option(help="Parallel envs (default: the preset's).", min=1, max=2**20)
+    ] = None,
+    iterations: Annotated[
+        int,
+        typer.Option(help="PPO iterations in total (with --resume: up to).", min=1, max=10**8),
+    ] = 1000,
+    run_dir: Annotated[
+        Path, typer.Option(help="Checkpoints, logs, curve and the exported policy.")
+    ] = Path("runs/dance"),
+    resume: Annotated[bool, typer.Option(help="Continue from RUN_DIR/checkpoint.pt.")] = False,
+    reward: Annotated[
+        str, typer.Option(help="paper (eq. 2: c_f 30, lambda_f 10), l2, or table1-1 ... table1-5.")
+    ] = "paper",
+    preset: Annotated[
+        str, typer.Option(help="cpu (small nets, fast on 2 cores) or paper (512-256-128, GPUs).")
+    ] = "cpu",
+    seed: Annotated[
+        int, typer.Option(help="Seed of the target bank, the envs and the networks.", **SeedRange)
+    ] = 1,
+    bank_size: Annotated[
+        int, typer.Option(help="Target sequences in the bank.", min=1, max=100_000)
+    ] = 256,
+    max_height: Annotated[
+        float | None,
+        typer.Option(
+            help="Highest front-foot target in the bank, m.", callback=finite_in(0.01, 1.0)
+        ),
+    ] = None,
+    checkpoint_every: Annotated[
+        float,
+        typer.Option(help="Seconds between checkpoints.", callback=finite_in(1.0, 86_400.0)),
+    ] = 120.0,
+    minutes: Annotated[
+        float | None,
+        typer.Option(
+            help="Stop (checkpoint and export) after this many minutes.",
+            callback=finite_in(0.0, 525_600.0),
+        ),
+    ] = None,
+    progress: Annotated[bool, typer.Option(help="Show a progress bar.")] = True,
+    feedforward: Annotated[
+        bool,
+        typer.Option(
+            "--feedforward/--no-feedforward",
+            help="Front-lift feed-forward (sim/feedforward.py); off: the policy alone lifts "
+            "the feet (the ablation where PPO stands still).",
+        ),
+    ] = True,
+    whole_body: Annotated[
+        bool,
+        typer.Option(
+            "--whole-body/--paws-only",
+            help="Whole-body dance: the bank has body targets (trunk height, roll, pitch, "
+            "yaw), the actor sees them and its heading error (IMU yaw since the start minus "
+            "the target yaw), rewards track them, a body feed-forward moves the legs.",
+        ),
+    ] = False,
+    init_from: Annotated[
+        Path | None,
+        typer.Option(
+            help="Start from another run's checkpoint.pt: shared inputs keep their weights, new "
+            "ones (e.g. --whole-body's body targets) start at zero weight."
+        ),
+    ] = None,
+    curriculum: Annotated[
+        tuple[float, float] | None,
+        typer.Option(
+            help="Whole-body curriculum, millions of env steps: the paws-only task until START "
+            "(no trunk motion, no trunk-tracking or foot-slide reward), the whole-body task "
+            "from END. Default: 3 13 from scratch, none with --init-from; "
+            "0 0: full size throughout.",
+            metavar="START END",
+        ),
+    ] = None,
+) -> None:
+    """Train the dance policy with PPO; exports RUN_DIR/policy.onnx and policy.json."""
+    from rich.console import Console
+
+    from quaddance.sim.config import DanceTaskCfg, ObsCfg, RewardCfg
+    from quaddance.train import DEFAULT_CURRICULUM_M_STEPS, PRESETS, TrainCfg, train
+
+    if engine not in ("cpu", "gpu"):
+        raise typer.BadParameter(f"--engine must be cpu or gpu, got {engine!r}")
+    if preset not in PRESETS:
+        raise typer.BadParameter(f"--preset must be one of {', '.join(PRESETS)}, got {preset!r}")
+    try:
+        RewardCfg.named(reward)
+    except ValueError as err:
+        raise typer.BadParameter(str(err)) from err
+    if curriculum is None and whole_body and init_from is None:
+        curriculum = DEFAULT_CURRICULUM_M_STEPS
+    ramp_steps = None
+    if curriculum is not None and whole_body:
+        start, end = curriculum
+        if not (0 <= start <= end < 1e6) or not all(math.isfinite(x) for x in curriculum):
+            raise typer.BadParameter(f"--curriculum needs 0 <= START <= END, got {start} {end}")
+        ramp_steps = (round(start * 1e6), round(end * 1e6)) if end > 0 else None
+    console = Console(stderr=True)
+    cfg = TrainCfg(
+        run_dir=run_dir,
+        engine=engine,
+        preset=preset,
+        num_envs=num_envs,
+        iterations=iterations,
+        reward=reward,
+        seed=seed,
+        resume=resume,
+        bank_size=bank_size,
+        max_height_m=max_height,
+        checkpoint_every_s=checkpoint_every,
+        max_minutes=minutes,
+        init_from=init_from,
+        curriculum_env_steps=ramp_steps,
+        task=DanceTaskCfg(
+            front_feedforward=feedforward, whole_body=whole_body, obs=ObsCfg(heading=whole_body)
+        ),
+    )
+    with console.status("Building the target bank (first run only) and the envs..."):
+        from quaddance.fileio import ensure_dir
+        from quaddance.train import build_bank
+
+        ensure_dir(run_dir)
+        bank = build_bank(cfg)
+    trainer = train(cfg, log=console.print, progress=progress, bank=bank)
+    console.print(
+        f"done: {trainer.iteration} iterations, {trainer.env_steps:,} env steps, "
+        f"{trainer.wall_s / 60:.1f} min; policy -> {run_dir / 'policy.onnx'}"
+    )
