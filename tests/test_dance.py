@@ -156,15 +156,15 @@ def test_policy_whose_json_disagrees_with_the_task_is_refused(tmp_path, short_so
 def test_a_failing_render_keeps_the_previous_video(short_song, tmp_path, monkeypatch):
     old = tmp_path / "dance.mp4"
     old.write_bytes(b"previous good video")
-    import quaddance.play.video as video
+    from quaddance.play.video import encode
 
-    encoder_args = video._encoder_args
+    encoder_args = encode.encoder_args
 
     def broken_encoder(*args, **kwargs):
         # A real failure of the encoder, after the workers have started rendering.
         return [a if a != "libx264" else "no_such_codec" for a in encoder_args(*args, **kwargs)]
 
-    monkeypatch.setattr(video, "_encoder_args", broken_encoder)
+    monkeypatch.setattr(encode, "encoder_args", broken_encoder)
     with pytest.raises(QuaddanceError, match="ffmpeg could not write"):
         run_dance(DanceJob(out_dir=tmp_path, song=short_song, width=160, height=120))
     assert old.read_bytes() == b"previous good video"

@@ -337,9 +337,10 @@ def test_a_slow_encoder_gets_every_frame_as_drawn(tmp_path: Path, scene_model, m
     import imageio_ffmpeg
 
     from quaddance.play import video
+    from quaddance.play.video import workers
 
     qpos = _dancing_qpos(scene_model, 4.0)
-    frame = video._FrameSlots.frame
+    frame = workers.FrameSlots.frame
 
     def slow_frame(self, worker: int, slot: int) -> memoryview:
         time.sleep(0.02)  # the workers run ahead meanwhile
@@ -348,21 +349,21 @@ def test_a_slow_encoder_gets_every_frame_as_drawn(tmp_path: Path, scene_model, m
     videos = []
     for name in ("fast", "slow"):
         if name == "slow":
-            monkeypatch.setattr(video._FrameSlots, "frame", slow_frame)
+            monkeypatch.setattr(workers.FrameSlots, "frame", slow_frame)
         out = tmp_path / f"{name}.mp4"
         with video.VideoRenderer(scene_model, 160, 120, workers=2) as renderer:
             if name == "fast":
                 # Workers yield the cores to the caller (its simulation feeds them).
                 own = os.getpriority(os.PRIO_PROCESS, 0)
-                for proc in renderer._procs:
+                for proc in renderer._pool.procs:
                     nice = os.getpriority(os.PRIO_PROCESS, proc.pid)
-                    assert nice == min(19, own + video.WORKER_NICE) > own
+                    assert nice == min(19, own + workers.WORKER_NICE) > own
             renderer.render(qpos, SIM_FPS, out, progress=False)
         reader = imageio_ffmpeg.read_frames(str(out))
         next(reader)
         videos.append(np.stack([np.frombuffer(f, np.uint8).astype(int) for f in reader]))
     n_video = round(4.0 * video.VIDEO_FPS)
-    assert n_video > 2 * 2 * video._SLOTS
+    assert n_video > 2 * 2 * workers.SLOTS
     assert videos[0].shape == videos[1].shape == (n_video, 160 * 120 * 3)
     assert np.abs(videos[0] - videos[1]).max() <= 2
 
@@ -374,19 +375,19 @@ def test_frame_buffers_fall_back_to_disk_and_a_full_disk_is_one_clear_error(
     import os
 
     from quaddance.errors import QuaddanceError
-    from quaddance.play import video
+    from quaddance.play.video import workers
 
-    slots = video._FrameSlots(tmp_path, 2, 64, 48)
+    slots = workers.FrameSlots(tmp_path, 2, 64, 48)
     try:
-        assert slots.path.is_file() and slots.path.stat().st_size == 2 * video._SLOTS * 64 * 48 * 3
-        assert len(slots.frame(1, video._SLOTS - 1)) == 64 * 48 * 3
+        assert slots.path.is_file() and slots.path.stat().st_size == 2 * workers.SLOTS * 64 * 48 * 3
+        assert len(slots.frame(1, workers.SLOTS - 1)) == 64 * 48 * 3
     finally:
         slots.close()
     assert not slots.path.exists()
 
     full = os.statvfs_result((4096, 4096, 100, 0, 0, 100, 0, 0, 0, 255))
     monkeypatch.setattr(os, "statvfs", lambda path: full)  # /dev/shm without room
-    slots = video._FrameSlots(tmp_path, 2, 64, 48)
+    slots = workers.FrameSlots(tmp_path, 2, 64, 48)
     assert slots.path.parent == tmp_path
     slots.close()
 
@@ -395,13 +396,13 @@ def test_frame_buffers_fall_back_to_disk_and_a_full_disk_is_one_clear_error(
 
     monkeypatch.setattr(os, "posix_fallocate", no_space)
     with pytest.raises(QuaddanceError, match=r"no room .* frame buffers .*No space left"):
-        video._FrameSlots(tmp_path, 2, 64, 48)
+        workers.FrameSlots(tmp_path, 2, 64, 48)
     assert not list(tmp_path.iterdir())  # nothing left behind
 
     # Without posix_fallocate (macOS), zeros are written instead.
     monkeypatch.delattr(os, "posix_fallocate")
-    slots = video._FrameSlots(tmp_path, 3, 640, 480)  # more than one 1 MB chunk of zeros
-    assert slots.path.stat().st_size == 3 * video._SLOTS * 640 * 480 * 3
+    slots = workers.FrameSlots(tmp_path, 3, 640, 480)  # more than one 1 MB chunk of zeros
+    assert slots.path.stat().st_size == 3 * workers.SLOTS * 640 * 480 * 3
     assert len(slots.frame(2, 0)) == 640 * 480 * 3
     slots.close()
 
