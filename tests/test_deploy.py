@@ -22,9 +22,12 @@ import torch
 
 import quaddance
 from quaddance.dancefile import Dance, save_dance
+from quaddance.deploy.controller import DanceController
+from quaddance.deploy.log import write_outputs
 from quaddance.deploy.robot import JointCommand, Reading
-from quaddance.deploy.runner import DanceController, DeployOptions, Runner, write_outputs
-from quaddance.deploy.safety import STATES, effort_limits_nm
+from quaddance.deploy.runner import DeployOptions, Runner
+from quaddance.deploy.safety import effort_limits_nm
+from quaddance.deploy.states import DeployState
 from quaddance.errors import QuaddanceError
 from quaddance.play.dance import target_config_for
 from quaddance.play.policy import OnnxPolicy, shipped_policy_path
@@ -269,16 +272,16 @@ def test_sim_deploy_of_a_song_dances_through_lag_with_a_soft_start_in_torque_lim
     # `done` stands on the policy: the trunk stays near level until damping lets it down
     # (a PD move to the nominal joints tilted it 0.14-0.9 rad under this lag; a 0.4 s fade of
     # the targets up to 0.26 rad, which failed CI once; the 0.8 s fade 0.07-0.18 in 12 runs).
-    standing = (log["state"] == STATES.index("done")) & (log["kp"] > 0)
+    standing = (log["state"] == DeployState.DONE.code) & (log["kp"] > 0)
     assert standing.sum() >= 50 and log["tilt_true_rad"][standing].max() < 0.25
     # The lag reached the runner (states 50 ms older after 15 s) and the dance went on.
-    dancing = log["state"] == STATES.index("dance")
+    dancing = log["state"] == DeployState.DANCE.code
     age_before = np.median(log["age_s"][dancing & (log["t_s"] < 14.9)])
     age_after = np.median(log["age_s"][dancing & (log["t_s"] > 15.3)])
     assert age_after - age_before > 0.04, (age_before, age_after)
     # Soft start: the torque the motor boards start each tick from, before any guard,
     # stayed in the motor limits, and it took >= 2 s.
-    standing = log["state"] == STATES.index("stand")
+    standing = log["state"] == DeployState.STAND.code
     assert np.isfinite(log["tau_est_nm"][standing]).all()
     assert (np.abs(log["tau_est_nm"][standing]) <= effort_limits_nm()).all()
     stand_s = log["wall_s"][standing][-1] - log["wall_s"][standing][0]
@@ -295,7 +298,7 @@ def test_sim_fault_ends_in_damp_within_its_deadline(policy, tmp_path, fault, dea
         skip_if_starved(summary)
     assert 0 <= t <= deadline_s, (fault, t, summary["events"])
     # Damping commands (no stiffness) from the switch on, and the log kept every tick.
-    damping = log["state"] == STATES.index("damp")
+    damping = log["state"] == DeployState.DAMP.code
     assert damping.sum() >= 5 and (log["kp"][damping] == 0).all()
     if fault == "push":
         assert summary["falls"] >= 1  # the shove topples the robot; damping caught it
@@ -343,7 +346,7 @@ def test_ctrl_c_damps_writes_the_log_and_exits_0(policy, tmp_path):
     assert 0.3 < summary["duration_s"] < 5.0
     with np.load(out / "log.npz") as z:
         states = z["state"]
-    assert states[-1] == STATES.index("damp") and (states == STATES.index("dance")).any()
+    assert states[-1] == DeployState.DAMP.code and (states == DeployState.DANCE.code).any()
 
 
 def test_deploy_refuses_bad_input_in_one_line(tmp_path):
@@ -367,15 +370,15 @@ def test_the_song_plays_from_where_the_dance_starts_or_not_at_all(monkeypatch, s
     afplay, which cannot, plays only songs from their start."""
     import shutil
 
-    from quaddance.deploy import runner
+    from quaddance.deploy.audio_player import AudioPlayer
 
     monkeypatch.setattr(os.path, "exists", lambda p: True)  # a sound device
     monkeypatch.setattr(shutil, "which", lambda name: f"/usr/bin/{name}")
-    audio = runner._Audio(Path("song.wav"), start_s)
+    audio = AudioPlayer(Path("song.wav"), start_s)
     assert audio._cmd[0] == "ffplay" and audio._cmd[-3:] == ["-ss", f"{start_s:g}", "song.wav"]
     monkeypatch.setattr(
         shutil, "which", lambda name: "/usr/bin/afplay" if name == "afplay" else None
     )
-    audio = runner._Audio(Path("song.wav"), start_s)
+    audio = AudioPlayer(Path("song.wav"), start_s)
     assert (audio._cmd == ["afplay", "song.wav"]) == (start_s == 0)
     assert (audio.status == "ready") == (start_s == 0)

@@ -10,13 +10,8 @@ import pytest
 
 from quaddance.deploy.robot import Reading, Robot
 from quaddance.deploy.runner import DeployOptions, Runner
-from quaddance.deploy.safety import (
-    STATES,
-    Safety,
-    SafetyCfg,
-    effort_limits_nm,
-    go1_joint_range_rad,
-)
+from quaddance.deploy.safety import Safety, SafetyCfg, effort_limits_nm, go1_joint_range_rad
+from quaddance.deploy.states import DeployState
 from quaddance.play.policy import OnnxPolicy, shipped_policy_path
 from quaddance.sim import go1
 
@@ -153,11 +148,11 @@ def test_late_inference_holds_the_last_command():
     held = log["held"].astype(bool)
     assert held.sum() == summary["guards"]["held_inference"] == slow.calls // 5
     idx = np.flatnonzero(held)
-    policy_states = [STATES.index("dance"), STATES.index("done")]  # done: the settle phase
+    policy_states = [DeployState.DANCE.code, DeployState.DONE.code]  # done: the settle phase
     assert idx.size >= 5 and np.isin(log["state"][idx], policy_states).all()
     # A held tick sends exactly the previous tick's targets; the others move on.
     np.testing.assert_array_equal(log["q_target"][idx], log["q_target"][idx - 1])
-    moving = np.flatnonzero((log["state"] == STATES.index("dance")) & ~held)[1:]
+    moving = np.flatnonzero((log["state"] == DeployState.DANCE.code) & ~held)[1:]
     assert (np.abs(log["q_target"][moving] - log["q_target"][moving - 1]).max(1) > 0).mean() > 0.9
 
 
@@ -177,7 +172,7 @@ def test_done_keeps_the_policy_balancing_at_its_rest_targets_then_damps():
         StandingRobot(), policy, targets, DeployOptions(seconds=1.0, auto_start=True, safety=cfg)
     )
     log = runner.run().log
-    done = np.flatnonzero(log["state"] == STATES.index("done"))
+    done = np.flatnonzero(log["state"] == DeployState.DONE.code)
     standing, damping = done[log["kp"][done] > 0], done[log["kp"][done] == 0]
     dt = 1.0 / policy.task.policy_hz
     assert standing.max() < damping.min()
@@ -235,6 +230,6 @@ def test_sigterm_damps_and_ends_the_run():
     assert summary["final_state"] == "damp"
     assert summary["events"][-1]["reason"] == "signal SIGTERM"
     assert 0.5 < summary["duration_s"] < 2.0
-    damping = log["state"] == STATES.index("damp")
+    damping = log["state"] == DeployState.DAMP.code
     assert damping[-1] and (log["kp"][damping] == 0).all()
     assert signal.getsignal(signal.SIGTERM) is before  # its handler only while it ran

@@ -302,7 +302,7 @@ def test_live_from_file_started_part_way_dances_the_rest(song, tmp_path):
 
 
 def test_live_video_plays_the_song_from_where_the_dance_heard_it(monkeypatch, tmp_path):
-    from quaddance.deploy.runner import STATES
+    from quaddance.deploy.states import DeployState
     from quaddance.live import session
     from quaddance.play import video
 
@@ -310,7 +310,7 @@ def test_live_video_plays_the_song_from_where_the_dance_heard_it(monkeypatch, tm
     monkeypatch.setattr(video, "render_video", lambda *a, **k: calls.append((a, k)))
     n = 10
     rollout = SimpleNamespace(base_rpy_rad=np.zeros((n, 3)), base_height_m=np.full(n, 0.27), fps=HZ)
-    log = {"state": np.full(n, STATES.index("dance")), "q": np.zeros((n, 12))}
+    log = {"state": np.full(n, DeployState.DANCE.code), "q": np.zeros((n, 12))}
     session._video(tmp_path / "dance.mp4", rollout, log, tmp_path / "song.wav", 5.0)
     ((args, kwargs),) = calls
     assert kwargs["audio_path"] == tmp_path / "song.wav" and kwargs["audio_offset_s"] == 5.0

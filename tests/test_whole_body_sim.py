@@ -102,8 +102,8 @@ def test_heading_error_is_imu_yaw_since_the_start_minus_the_target_wrapped():
 
 
 def test_the_robot_runner_measures_heading_from_the_dance_start():
+    from quaddance.deploy.controller import DanceController
     from quaddance.deploy.robot import Reading
-    from quaddance.deploy.runner import DanceController
     from quaddance.play.policy import OnnxPolicy, shipped_policy_path
 
     def reading(yaw: float) -> Reading:

@@ -70,7 +70,8 @@ def make_robot(job: DeployJob):
 def run_deploy(job: DeployJob, status: Callable[[str], None] = lambda m: None) -> tuple[dict, dict]:
     """Run the job; returns (deploy.json contents, output paths)."""
     from quaddance.dancefile import load_dance
-    from quaddance.deploy.runner import DeployOptions, Runner, write_outputs
+    from quaddance.deploy.log import write_outputs
+    from quaddance.deploy.runner import DeployOptions, Runner
     from quaddance.fileio import check_output_file, ensure_dir
     from quaddance.play.dance import target_config_for
     from quaddance.play.policy import OnnxPolicy, shipped_policy_path

@@ -15,9 +15,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from quaddance.deploy.robot import JointCommand, Reading
+from quaddance.deploy.states import DeployState
 from quaddance.sim import go1
-
-STATES: tuple[str, ...] = ("passive", "stand", "ready", "dance", "done", "damp")
 
 
 def soft_joint_limits_rad(joint_range_rad: np.ndarray, margin_rad: float) -> np.ndarray:
@@ -80,14 +79,14 @@ class SafetyCfg:
 @dataclass
 class Event:
     clock_s: float  #: runner clock (time.monotonic) of the transition
-    frm: str
-    to: str
+    frm: DeployState
+    to: DeployState
     reason: str
 
     def to_json(self, zero_s: float) -> dict:
         """With ``t_s`` relative to ``zero_s`` (dance time 0 on the runner clock)."""
         t_s = round(self.clock_s - zero_s, 4)
-        return {"t_s": t_s, "from": self.frm, "to": self.to, "reason": self.reason}
+        return {"t_s": t_s, "from": self.frm.value, "to": self.to.value, "reason": self.reason}
 
 
 @dataclass
@@ -112,7 +111,7 @@ class Safety:
     kd: float
     nominal_rad: np.ndarray
     joint_range_rad: np.ndarray
-    state: str = "passive"
+    state: DeployState = DeployState.PASSIVE
     events: list[Event] = field(default_factory=list)
     counts: GuardCounts = field(default_factory=GuardCounts)
 
@@ -126,7 +125,7 @@ class Safety:
         self.stand_from: np.ndarray | None = None
 
     # --- transitions ----------------------------------------------------------------------
-    def go(self, to: str, reason: str, now_s: float) -> None:
+    def go(self, to: DeployState, reason: str, now_s: float) -> None:
         """Change state at ``now_s`` (runner clock)."""
         if to == self.state:
             return
@@ -135,8 +134,8 @@ class Safety:
         self.entered_s = now_s
 
     def damp(self, reason: str, now_s: float) -> None:
-        if self.state != "damp":
-            self.go("damp", reason, now_s)
+        if self.state != DeployState.DAMP:
+            self.go(DeployState.DAMP, reason, now_s)
 
     # --- checks on what came in ------------------------------------------------------------
     def check_reading(self, reading: Reading | None) -> str | None:
@@ -158,7 +157,10 @@ class Safety:
         lim = self.cfg.max_roll_pitch_rad
         if abs(roll) > lim or abs(pitch) > lim:
             return f"roll {roll:+.2f} / pitch {pitch:+.2f} rad past {lim:g}"
-        if self.state in ("ready", "dance") and trunk_height_m < self.cfg.min_trunk_height_m:
+        if (
+            self.state in (DeployState.READY, DeployState.DANCE)
+            and trunk_height_m < self.cfg.min_trunk_height_m
+        ):
             return f"trunk collapsing ({trunk_height_m:.3f} m above the feet)"
         return None
 

@@ -208,13 +208,8 @@ class _LiveFeed:
 def run_live(job: LiveJob, status=lambda msg: None) -> tuple[dict, dict[str, Path]]:
     """Run `quaddance live`; returns (live.json contents, output paths)."""
     from quaddance.deploy.job import DeployJob, make_robot
-    from quaddance.deploy.runner import (
-        DeployOptions,
-        Runner,
-        percentiles,
-        rollout_from_log,
-        write_outputs,
-    )
+    from quaddance.deploy.log import percentiles, rollout_from_log, write_outputs
+    from quaddance.deploy.runner import DeployOptions, Runner
     from quaddance.fileio import check_output_file, ensure_dir, write_json
     from quaddance.play.dance import target_config_for
     from quaddance.play.metrics import whole_body_metrics
@@ -374,10 +369,10 @@ def _tracker_latency_ms() -> float:
 def _video(path: Path, rollout, log: dict, song: Path, start_s: float = 0.0) -> Path:
     """dance.mp4 from the danced poses (trunk from the simulator, joints from the encoders)
     with the song from ``start_s`` into it (where the dance heard it), afterwards."""
-    from quaddance.deploy.runner import STATES
+    from quaddance.deploy.states import DeployState
     from quaddance.play.video import render_video
 
-    dancing = log["state"] == STATES.index("dance")
+    dancing = log["state"] == DeployState.DANCE.code
     q = log["q"][dancing]
     r, p, y = rollout.base_rpy_rad.T
     cr, sr, cp, sp, cy, sy = (

@@ -1,0 +1,145 @@
+"""The policy side of the robot runner (`DanceController`): reading -> observation -> action
+-> joint targets, for one robot.
+
+It builds the actor's observation with the training code's own `ActorObservation` and the
+joint targets with the task's own `sim.task.joint_targets`, so what the policy sees and
+commands on a robot is what it saw and commanded in training.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from quaddance.deploy.robot import Reading
+from quaddance.errors import QuaddanceError
+from quaddance.play.policy import OnnxPolicy
+from quaddance.sim import go1
+from quaddance.sim.body import BodyFeedforward
+from quaddance.sim.feedforward import FrontLiftFeedforward
+from quaddance.sim.observations import ActorObservation, Measurement
+from quaddance.sim.state import yaw_from_quat
+from quaddance.sim.task import joint_targets
+from quaddance.targets import BODY_LIMITS_FOUR_FEET
+
+
+class DanceController:
+    """One robot's policy step: reading -> observation -> action -> joint targets.
+
+    Joint targets come from the task's own `sim.task.joint_targets` (one definition of the
+    law), fed with the policy JSON's nominal pose, action scale and feed-forward table.
+    """
+
+    def __init__(
+        self, policy: OnnxPolicy, targets_m: np.ndarray, body_targets: np.ndarray | None = None
+    ) -> None:
+        cfg = policy.task
+        self.policy = policy
+        self.cfg = cfg
+        self.dev = torch.device("cpu")
+        paws = torch.as_tensor(np.asarray(targets_m), dtype=torch.float32)
+        if paws.ndim != 2 or paws.shape[1] != 4 or paws.shape[0] < 1:
+            raise QuaddanceError(f"dance targets must be (T, 4), got {tuple(paws.shape)}")
+        body = torch.zeros(paws.shape[0], 4)
+        if body_targets is not None:
+            body = torch.as_tensor(np.asarray(body_targets), dtype=torch.float32)
+            if body.shape != paws.shape:
+                raise QuaddanceError(
+                    f"body targets must be (T, 4) like the paw targets {tuple(paws.shape)}, "
+                    f"got {tuple(body.shape)}"
+                )
+        self.rows = torch.cat([paws, body], dim=1)  # (T, 8): paw targets, then body targets
+        self.actor_obs = ActorObservation(cfg, 1, self.dev)
+        spec = policy.spec  # the policy's JSON contract
+        self.nominal_joint_pos = torch.tensor(spec.nominal_joint_pos_rad, dtype=torch.float32)
+        self.action_scale = torch.tensor(spec.action_scale, dtype=torch.float32)
+        ff = spec.front_feedforward
+        self.feedforward = (
+            FrontLiftFeedforward(cfg.scene, self.dev, np.asarray(ff.thigh_calf_offsets_rad))
+            if cfg.front_feedforward and ff is not None
+            else None
+        )
+        self.body_feedforward = BodyFeedforward(cfg.scene, self.dev) if cfg.whole_body else None
+        self.step = 0  # dance step (policy ticks since dance time 0)
+        self.heading_zero_rad = 0.0  # IMU yaw at dance time 0 (`reset`)
+        self._fade: tuple[torch.Tensor, int, int] | None = None
+        #: What `fade_out` ends at: feet down; a whole-body policy also crouches (the lowest
+        #: trunk height it dances), so damping after the dance lets it down from lower.
+        self.rest_row = torch.zeros(1, self.rows.shape[1])  # same columns as `rows`
+        if cfg.whole_body:
+            self.rest_row[0, paws.shape[1]] = BODY_LIMITS_FOUR_FEET.height_offset_m[0]
+        self.last_action = torch.zeros(1, go1.NUM_JOINTS)
+        self._ids = torch.zeros(1, dtype=torch.long)
+
+    @property
+    def n_steps(self) -> int:
+        return int(self.rows.shape[0])
+
+    def extend(self, targets_m: np.ndarray, body_targets: np.ndarray) -> None:
+        """Append (K, 4) paw and (K, 4) body targets: a dance made while it is danced."""
+        more = torch.cat(
+            [
+                torch.as_tensor(np.asarray(targets_m), dtype=torch.float32).reshape(-1, 4),
+                torch.as_tensor(np.asarray(body_targets), dtype=torch.float32).reshape(-1, 4),
+            ],
+            dim=1,
+        )
+        self.rows = torch.cat([self.rows, more], dim=0)
+
+    def _row(self, ahead_steps: int) -> torch.Tensor:
+        k = self.step + ahead_steps
+        if self._fade is not None:
+            row, first, n = self._fade
+            u = min(1.0, (k - first) / n)
+            return row + u * (self.rest_row - row)
+        return self.rows[min(k, self.n_steps - 1)][None]
+
+    def targets_at(self, ahead_steps: int) -> torch.Tensor:
+        """(1, 4) paw targets ``ahead_steps`` ticks from the current step (held at the end;
+        faded to `rest_row` after `fade_out`)."""
+        return self._row(ahead_steps)[:, :4]
+
+    def body_targets_at(self, ahead_steps: int) -> torch.Tensor:
+        """(1, 4) body targets, as `targets_at`."""
+        return self._row(ahead_steps)[:, 4:]
+
+    def fade_out(self, steps: int) -> None:
+        """From the current step on, targets go linearly from their value now to `rest_row`
+        over ``steps`` ticks, and stay there."""
+        self._fade = (self._row(0).clone(), self.step, max(1, steps))
+
+    def measurement(self, reading: Reading) -> Measurement:
+        """The reading as the actor's `Measurement`, its heading relative to the dance's start."""
+        t = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float32)[None]  # noqa: E731
+        return Measurement.from_imu(
+            t(reading.quat_wxyz),
+            t(reading.gyro_rad_s),
+            t(reading.joint_pos_rad),
+            t(reading.joint_vel_rad_s),
+            self.heading_zero_rad,
+        )
+
+    def reset(self, reading: Reading) -> None:
+        """Dance time 0: no previous action, the history filled with the current frame, the
+        heading measured from here."""
+        self.step = 0
+        self._fade = None
+        self.last_action = torch.zeros(1, go1.NUM_JOINTS)
+        quat = torch.as_tensor(np.asarray(reading.quat_wxyz), dtype=torch.float32)[None]
+        self.heading_zero_rad = float(yaw_from_quat(quat)[0])
+        prop = self.actor_obs.proprio(self.measurement(reading), self.last_action)
+        self.actor_obs.reset(self._ids, prop)
+
+    def observe(self, reading: Reading, step: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """(proprio frame, observation (1, D)) at dance step ``step``."""
+        self.step = step
+        prop = self.actor_obs.proprio(self.measurement(reading), self.last_action)
+        return prop, self.actor_obs.build(prop, self.targets_at, self.body_targets_at)
+
+    def commit(self, prop: torch.Tensor, action: torch.Tensor) -> None:
+        """The frame just seen joins the history; ``action`` is what the robot now does."""
+        self.actor_obs.push(prop)
+        self.last_action = action
+
+    def joint_targets(self, action: torch.Tensor) -> torch.Tensor:
+        return joint_targets(action, self)
