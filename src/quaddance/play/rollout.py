@@ -121,7 +121,7 @@ class PinnedDynamics:
 
     def variant(self, scene) -> np.ndarray:
         """(1, 3) dynamics row (friction, added mass kg, motor strength) for the engine."""
-        from quaddance.sim.engines import nominal_dynamics
+        from quaddance.sim.engine import nominal_dynamics
 
         row = nominal_dynamics(scene)
         if self.friction is not None:

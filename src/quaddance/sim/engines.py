@@ -1,36 +1,28 @@
-"""Physics engines behind the dance task: native MuJoCo on CPU, MuJoCo Warp on GPU.
-
-Both step N copies of the same scene with per-env controls for `nsub` physics substeps and
-return (qpos, qvel, sensordata) as torch tensors; `quaddance.sim.state.state_from_arrays`
-turns them into the task's state. Domain randomisation of the dynamics picks, per env, one
-of K model variants (friction, added base mass, motor strength) built once.
+"""The physics engines behind the dance task (`sim.engine.Engine`): native MuJoCo on the CPU
+(`CpuEngine`, here) and MuJoCo Warp on the GPU (`sim.warp_engine.WarpEngine`); `make_engine`
+picks one by name.
 """
 
 from __future__ import annotations
 
 import copy
 import os
-from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 import torch
 
+from quaddance.sim.engine import (
+    ADDED_MASS_KG,
+    FRICTION,
+    MOTOR_STRENGTH,
+    Engine,
+    EngineOutput,
+    nominal_dynamics,
+    robot_collision_geoms,
+)
 from quaddance.sim.scene import SceneCfg, build_model
 from quaddance.sim.state import SensorLayout
-
-# Columns of a dynamics variant row.
-FRICTION, ADDED_MASS_KG, MOTOR_STRENGTH = 0, 1, 2
-
-
-def nominal_dynamics(scene: SceneCfg) -> np.ndarray:
-    """(1, 3) the unrandomised robot: the scene's friction, no added mass, full strength."""
-    return np.array([[scene.foot_friction, 0.0, 1.0]])
-
-
-def robot_collision_geoms(model: mujoco.MjModel) -> list[int]:
-    """Ids of every robot geom that can touch the floor (feet, and calves when kneeling)."""
-    return [i for i in range(model.ngeom) if "_collision" in (model.geom(i).name or "")]
 
 
 def apply_dynamics(model: mujoco.MjModel, row: np.ndarray) -> None:
@@ -46,13 +38,6 @@ def apply_dynamics(model: mujoco.MjModel, row: np.ndarray) -> None:
     model.actuator_gainprm[:, 0] *= row[MOTOR_STRENGTH]
     model.actuator_biasprm[:, 1] *= row[MOTOR_STRENGTH]
     model.actuator_biasprm[:, 2] *= row[MOTOR_STRENGTH]
-
-
-@dataclass
-class EngineOutput:
-    qpos: torch.Tensor  # (N, nq)
-    qvel: torch.Tensor  # (N, nv)
-    sensordata: torch.Tensor  # (N, nsensordata)
 
 
 class CpuEngine:
@@ -108,7 +93,9 @@ class CpuEngine:
     def _qvel(self, state: np.ndarray) -> np.ndarray:
         return state[..., 1 + self.nq : 1 + self.nq + self.nv]
 
-    def set_variants(self, env_ids: np.ndarray, variant_idx: np.ndarray) -> None:
+    def set_variants(
+        self, env_ids: torch.Tensor | np.ndarray, variant_idx: torch.Tensor | np.ndarray
+    ) -> None:
         self.variant_idx[env_ids] = variant_idx
         for e, v in zip(env_ids.tolist(), np.asarray(variant_idx).tolist(), strict=True):
             self._models[e] = self._variant_models[v]
@@ -164,7 +151,7 @@ class CpuEngine:
         )
 
 
-def make_engine(name: str, num_envs: int, scene: SceneCfg, variants: np.ndarray):
+def make_engine(name: str, num_envs: int, scene: SceneCfg, variants: np.ndarray) -> Engine:
     """`cpu` (native MuJoCo, mujoco.rollout) or `gpu` (MuJoCo Warp on CUDA)."""
     if name == "cpu":
         return CpuEngine(num_envs, scene, variants)

@@ -15,7 +15,8 @@ import torch
 from quaddance.sim import go1, observations, rewards, terminations
 from quaddance.sim.body import BODY_DIM, BodyFeedforward
 from quaddance.sim.config import DanceTaskCfg
-from quaddance.sim.engines import make_engine, nominal_dynamics
+from quaddance.sim.engine import Engine, nominal_dynamics
+from quaddance.sim.engines import make_engine
 from quaddance.sim.feedforward import FrontLiftFeedforward
 from quaddance.sim.state import RobotState, state_from_arrays
 
@@ -105,7 +106,7 @@ class DanceEnv:
                 f"; the terms are {', '.join(rewards.TERM_NAMES)}"
             )
         variants = sample_dynamics(cfg, self._rng) if dynamics is None else np.asarray(dynamics)
-        self.engine = make_engine(engine, cfg.num_envs, cfg.scene, variants)
+        self.engine: Engine = make_engine(engine, cfg.num_envs, cfg.scene, variants)
         self.device = self.engine.device
         dev = self.device
         self._variants = torch.as_tensor(self.engine.variants, dtype=torch.float32, device=dev)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from quaddance.sim.engines import (
+from quaddance.sim.engine import (
     ADDED_MASS_KG,
     FRICTION,
     MOTOR_STRENGTH,
@@ -25,6 +25,8 @@ _BATCHED = ("geom_friction", "body_mass", "actuator_gainprm", "actuator_biasprm"
 
 
 class WarpEngine:
+    """All envs as the worlds of one batched MuJoCo Warp model (see the module)."""
+
     name = "gpu"
 
     def __init__(
