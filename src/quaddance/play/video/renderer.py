@@ -33,7 +33,7 @@ class VideoRenderer:
     `stream` opens the video: poses can be added while the dance is still being simulated
     (`VideoStream.add`), and frames are handed out round robin as soon as their camera
     position is known; one ffmpeg encodes them in order (H.264) and muxes the song (AAC) in
-    the same pass. `render` (all poses at once) and `start` are shorthands. One video per
+    the same pass. `render` (all poses at once) is a shorthand. One video per
     instance; use it as a context manager (or call `close`) so the workers always end.
     """
 
@@ -45,14 +45,8 @@ class VideoRenderer:
         workers: int = 2,
         cfg: RenderCfg | None = None,
     ) -> None:
-        """
-        Args:
-            model: as in `render_video`; None (the dance scene) is built in the workers, not
-                here, so the caller does not wait for the compilation.
-            width, height: frame size in pixels (even).
-            workers: rendering processes; one per core is fastest.
-            cfg: look, camera and encoder settings.
-        """
+        """Start the render workers now: ``model``, ``width``, ``height`` and ``workers`` as
+        in `WorkerPool`; ``cfg``: look, camera and encoder settings."""
         self.width, self.height, self.cfg = width, height, cfg or RenderCfg()
         self._pool = WorkerPool(model, width, height, workers, self.cfg)
         self._used = False
@@ -119,30 +113,15 @@ class VideoRenderer:
         qpos_s: np.ndarray,
         sim_fps: float,
         out_path: str | Path,
+        *,
         audio_path: str | Path | None = None,
         audio_offset_s: float = 0.0,
         fps: float = VIDEO_FPS,
         target_heights_m: np.ndarray | None = None,
         progress: bool = True,
     ) -> dict[str, Any]:
-        """Render the video and wait for it; the arguments and result are `render_video`'s."""
-        return self.start(
-            qpos_s, sim_fps, out_path, audio_path, audio_offset_s, fps, target_heights_m, progress
-        ).wait()
-
-    def start(
-        self,
-        qpos_s: np.ndarray,
-        sim_fps: float,
-        out_path: str | Path,
-        audio_path: str | Path | None = None,
-        audio_offset_s: float = 0.0,
-        fps: float = VIDEO_FPS,
-        target_heights_m: np.ndarray | None = None,
-        progress: bool = True,
-    ) -> RenderTask:
-        """Start rendering all poses at once in a background thread; `RenderTask.wait`
-        returns the timing or raises. Arguments are checked here, before anything starts."""
+        """Render all poses at once and wait for the video; the arguments (checked before
+        anything starts) and the result are `render_video`'s."""
         qpos = np.asarray(qpos_s, dtype=float)
         layout = self._pool.layout
         nq = layout.nq if layout is not None else qpos.shape[-1]
@@ -152,7 +131,7 @@ class VideoRenderer:
             target_heights_m is not None, progress,
         )  # fmt: skip
         stream.add(qpos, target_heights_m)
-        return stream.finish()
+        return stream.finish().wait()
 
 
 class VideoStream:
