@@ -18,7 +18,7 @@ import soundfile as sf
 
 from quaddance.errors import InputFileError, QuaddanceError
 from quaddance.music.audio import load_audio
-from quaddance.music.live import ArraySource, FileSource, MicSource
+from quaddance.music.live import ArraySource, FileSource, MicSource, track_samples
 from quaddance.music.online_beats import (
     BLOCK_S,
     FALLBACK_S,
@@ -282,6 +282,40 @@ def test_tracker_locks_at_a_slow_tempo_as_soon_as_two_beats_confirm_the_heard_gr
     assert lock_s - start_s <= 4.5
     errors = _errors_s(events, ref, lock_s, ref[-1])
     assert len(errors) >= 4 and errors.max() <= HIT_WINDOW_S
+
+
+def test_analyze_online_writes_what_the_live_tracker_reports(tmp_path: Path) -> None:
+    """`analyze --online` runs the tracker of `live` over a file at full speed (`track_file`)
+    and writes the keys of `analyze`'s JSON that apply, plus the lock's time; `track_file`
+    from part-way in tracks what follows as music already playing, in song time from there."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from quaddance.cli import app
+    from quaddance.music.live import track_file
+
+    y, ref = _click_track([(120.0, 12.0)])
+    path = _write_wav(tmp_path / "clicks.wav", y)
+    out = tmp_path / "online.json"
+    result = CliRunner().invoke(app, ["analyze", str(path), "--online", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    data = json.loads(out.read_text())
+    assert set(data) == {"tempo_bpm", "beats_s", "downbeats_s", "duration_s", "source", "lock_s"}
+    track = track_file(path)
+    assert track.source == data["source"] == str(path)
+    assert data["beats_s"] == [round(t, 4) for t in track.beats_s.tolist()]
+    assert set(data["downbeats_s"]) <= set(data["beats_s"])
+    assert data["lock_s"] == pytest.approx(track.first_lock_s(), abs=1e-4)
+    assert data["lock_s"] <= 6.0 and data["tempo_bpm"] == pytest.approx(120.0, rel=0.01)
+    assert data["duration_s"] == pytest.approx(len(y) / SR_HZ, abs=BLOCK_S)
+    errors = _errors_s(list(track.beats), ref, data["lock_s"], ref[-1])
+    assert len(errors) >= 8 and errors.max() <= HIT_WINDOW_S
+
+    late = track_file(path, start_s=4.0)
+    alone = track_samples(y[4 * SR_HZ :], song_start=False)
+    np.testing.assert_array_equal(late.beats_s, alone.beats_s)
+    np.testing.assert_array_equal(late.locked, alone.locked)
 
 
 def test_tracker_predicts_the_next_beat_and_downbeat() -> None:

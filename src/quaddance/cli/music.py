@@ -12,6 +12,14 @@ from quaddance.cli._options import SongArg
 
 def analyze_cmd(
     song: SongArg,
+    online: Annotated[
+        bool,
+        typer.Option(
+            "--online",
+            help="Run the online beat tracker of `live` over the song instead (as fast as the "
+            "CPU allows): beats, downbeats and tempo as it reports them, and lock_s.",
+        ),
+    ] = False,
     out: Annotated[
         Path, typer.Option("--out", "-o", help="Where to write the analysis JSON.")
     ] = Path("analysis.json"),
@@ -21,12 +29,13 @@ def analyze_cmd(
 
     from quaddance.fileio import check_output_file
     from quaddance.music.analysis import analyze_file
+    from quaddance.music.live import track_file
 
     check_output_file(out)  # before the work, not after it
     with Console(stderr=True).status(f"Analysing {song.name}..."):
-        analysis = analyze_file(song)
-    analysis.save_json(out)
-    print(f"{song.name}: {analysis.summary()} -> {out}")
+        result = track_file(song) if online else analyze_file(song)
+    result.save_json(out)
+    print(f"{song.name}: {result.summary()} -> {out}")
 
 
 def demo_song_cmd(

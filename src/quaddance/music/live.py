@@ -8,10 +8,15 @@ card has recorded.
 
 sounddevice (PortAudio) is imported only when a microphone is opened: where the PortAudio
 library or an input device is missing, ``MicSource`` raises one ``QuaddanceError`` line.
+
+`track_file` and `track_samples` run the online beat tracker over a whole recording as fast as
+the CPU allows, block by block exactly as ``live`` feeds it (``quaddance analyze --online``,
+the benchmarks and the tests use them).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import queue
 import time
 from collections.abc import Iterator
@@ -22,7 +27,13 @@ from typing import Any
 import numpy as np
 
 from quaddance.errors import QuaddanceError
-from quaddance.music.online_beats import BLOCK_S, SR_HZ
+from quaddance.music.online_beats import (
+    BLOCK_S,
+    SR_HZ,
+    BeatEvent,
+    OnlineBeatTracker,
+    TrackerState,
+)
 
 MIC_STALL_S = 2.0
 """A microphone that delivers nothing for this long has stopped: an error, not a hang."""
@@ -124,6 +135,129 @@ class FileSource(ArraySource):
             )
         self.start_s = first / sr
         super().__init__(y[first:], sr, block_s=block_s, realtime=realtime)
+
+
+@dataclass(frozen=True)
+class OnlineTrack:
+    """What the online tracker reported over a whole recording.
+
+    Attributes:
+        beats: the beat events in the order reported (before and after the lock).
+        block_end_s: (n_blocks,) song time of the end of each block fed, seconds.
+        locked: (n_blocks,) whether the tracker was locked after each block.
+        tempo_bpm: (n_blocks,) its tempo after each block, BPM (0 before any estimate).
+        final: its state after the last block.
+        tracker_s: wall-clock seconds spent inside the tracker (decoding not counted).
+        source: the file tracked ("" for samples).
+    """
+
+    beats: tuple[BeatEvent, ...]
+    block_end_s: np.ndarray
+    locked: np.ndarray
+    tempo_bpm: np.ndarray
+    final: TrackerState
+    tracker_s: float
+    source: str = ""
+
+    @property
+    def beats_s(self) -> np.ndarray:
+        """(n,) times of the beats, song seconds."""
+        return np.array([b.time_s for b in self.beats], dtype=np.float64)
+
+    @property
+    def downbeats_s(self) -> np.ndarray:
+        """(n,) times of the beats reported as downbeats, song seconds."""
+        return np.array([b.time_s for b in self.beats if b.downbeat], dtype=np.float64)
+
+    def first_lock_s(self, after_s: float = 0.0) -> float | None:
+        """Song time of the end of the first block at or after ``after_s`` after which the
+        tracker was locked, seconds; None if it never was."""
+        found = np.flatnonzero(self.locked & (self.block_end_s >= after_s))
+        return float(self.block_end_s[found[0]]) if found.size else None
+
+    @property
+    def locked_tempo_bpm(self) -> float:
+        """Tempo from the median interval of the beats after the first lock, as ``analyze``
+        takes its tempo from its beats, BPM; 0 without a lock."""
+        lock_s = self.first_lock_s()
+        after = self.beats_s[self.beats_s >= lock_s] if lock_s is not None else np.zeros(0)
+        return 60.0 / float(np.median(np.diff(after))) if after.size >= 2 else 0.0
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """The keys of ``analyze``'s JSON that an online tracker has (``tempo_bpm``:
+        `locked_tempo_bpm`) and ``lock_s`` (`first_lock_s`, null without a lock); times
+        rounded to 0.1 ms, as ``analyze`` writes them."""
+        lock_s = self.first_lock_s()
+        return {
+            "tempo_bpm": round(self.locked_tempo_bpm, 3),
+            "beats_s": [round(float(t), 4) for t in self.beats_s],
+            "downbeats_s": [round(float(t), 4) for t in self.downbeats_s],
+            "lock_s": None if lock_s is None else round(lock_s, 4),
+            "duration_s": round(float(self.block_end_s[-1]) if self.block_end_s.size else 0.0, 4),
+            "source": self.source,
+        }
+
+    def save_json(self, path: str | Path) -> None:
+        """Write `to_json_dict` as JSON, atomically."""
+        from quaddance.fileio import write_json
+
+        write_json(path, self.to_json_dict())
+
+    def summary(self) -> str:
+        """One line for a person: tempo, beats and the lock."""
+        lock_s = self.first_lock_s()
+        lock = "no lock" if lock_s is None else f"locked at {lock_s:.2f} s"
+        return f"tempo {self.locked_tempo_bpm:.1f} BPM, {len(self.beats)} beats, {lock}"
+
+
+def track_samples(
+    y: np.ndarray, sr_hz: int = SR_HZ, song_start: bool = True, block_s: float = BLOCK_S
+) -> OnlineTrack:
+    """Run the online beat tracker over ``y`` block by block, as ``live`` feeds it, without
+    waiting for the wall clock.
+
+    Args:
+        y: (n,) mono samples at ``sr_hz``, which must be the tracker's ``SR_HZ``.
+        sr_hz: their sample rate, Hz.
+        song_start: the tracker's (False: the music may already be playing, as heard by a
+            microphone or from a file started part-way).
+        block_s: block length, seconds.
+    """
+    tracker = OnlineBeatTracker(sr_hz, song_start=song_start)
+    beats: list[BeatEvent] = []
+    end_s: list[float] = []
+    locked: list[bool] = []
+    tempo_bpm: list[float] = []
+    tracker_s = 0.0
+    for block in ArraySource(y, sr_hz, block_s=block_s):
+        t0 = time.perf_counter()
+        beats += tracker.update(block.samples, block.t_end_s)
+        tracker_s += time.perf_counter() - t0
+        state = tracker.state
+        end_s.append(block.t_end_s)
+        locked.append(state.locked)
+        tempo_bpm.append(state.tempo_bpm)
+    return OnlineTrack(
+        tuple(beats),
+        np.asarray(end_s, dtype=np.float64),
+        np.asarray(locked, dtype=bool),
+        np.asarray(tempo_bpm, dtype=np.float64),
+        tracker.state,
+        tracker_s,
+    )
+
+
+def track_file(path: str | Path, start_s: float = 0.0, block_s: float = BLOCK_S) -> OnlineTrack:
+    """`track_samples` of an audio file decoded as `FileSource` decodes it, from ``start_s``
+    on (song time 0 there; the tracker is told the music may already be playing when
+    ``start_s`` > 0, as ``live --from-file --start`` tells it).
+
+    Raises:
+        InputFileError: the file cannot be read, or ``start_s`` is not within it.
+    """
+    source = FileSource(path, block_s=block_s, realtime=False, start_s=start_s)
+    track = track_samples(source.y, source.sr_hz, song_start=start_s == 0, block_s=block_s)
+    return dataclasses.replace(track, source=str(path))
 
 
 def _import_sounddevice() -> Any:
