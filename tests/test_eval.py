@@ -249,7 +249,7 @@ def test_eval_flags_reach_the_settings(song, tmp_path, captured, flags, field, v
 
 
 def test_eval_held_out_other_set_flag_writes_and_evaluates_that_set(tmp_path, captured):
-    from quaddance.bench.heldout import OTHER_ITEMS
+    from quaddance.play.heldout import OTHER_ITEMS
 
     folder = tmp_path / "other"
     args = ["eval", "--held-out", str(folder), "--set", "other", "-o", str(tmp_path / "r.md")]

@@ -15,10 +15,10 @@ from scipy.signal import find_peaks
 from typer.testing import CliRunner
 
 from quaddance.bench import envelope
-from quaddance.bench.heldout import OTHER_ITEMS, render_feet, write_held_out_set
 from quaddance.choreo.motion import load_motion
 from quaddance.cli import app
 from quaddance.music.synth import render_song
+from quaddance.play.heldout import OTHER_ITEMS, render_feet, write_held_out_set
 from quaddance.play.rollout import PinnedDynamics
 from quaddance.sim import go1
 

@@ -77,7 +77,7 @@ COLOURS = ("tab:red", "tab:green", "tab:blue")
 def plot_compare(path: Path, curves: dict[str, Path], standing_m: float) -> Path:
     """Front-foot error and rear lift of each labelled run over the env steps of the first
     one, with the standing-still error as a line."""
-    from quaddance.play.plots import _save, subplots  # the project's headless, atomic savefig
+    from quaddance.play.plots import save_figure, subplots
 
     cols_by_name = {name: read_curve(p) for name, p in curves.items()}
     end = next(iter(cols_by_name.values()))["env_steps"][-1]
@@ -101,7 +101,7 @@ def plot_compare(path: Path, curves: dict[str, Path], standing_m: float) -> Path
     for ax in axes:
         ax.grid(alpha=0.3)
     fig.tight_layout()
-    _save(fig, path)
+    save_figure(fig, path)
     return path
 
 

@@ -1,6 +1,6 @@
 """`quaddance bench envelope`: how far the policy's robustness reaches.
 
-Two parts, each on a few held-out items (`quaddance.bench.heldout`), with the dynamics pinned
+Two parts, each on a few held-out items (`quaddance.play.heldout`), with the dynamics pinned
 (`quaddance.play.rollout.PinnedDynamics`) rather than drawn:
 
 1. Ends of the training ranges (`quaddance.sim.config.DomainRandCfg`): each of friction,
@@ -57,7 +57,7 @@ ENVELOPE_ITEMS: dict[str, tuple[str, ...]] = {
 
 def default_items(folder: Path) -> list[Path]:
     """Write the held-out sets into ``folder`` and return the envelope's items."""
-    from quaddance.bench.heldout import write_held_out_set
+    from quaddance.play.heldout import write_held_out_set
 
     items = []
     for which, names in ENVELOPE_ITEMS.items():

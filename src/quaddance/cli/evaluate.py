@@ -62,8 +62,8 @@ def eval_cmd(
     from rich.console import Console
     from rich.progress import Progress
 
-    from quaddance.bench.heldout import HELD_OUT_SETS, write_held_out_set
     from quaddance.play.evaluate import EvalSettings, collect_items, evaluate, summary_line
+    from quaddance.play.heldout import HELD_OUT_SETS, write_held_out_set
     from quaddance.play.rollout import POLICY_OUTPUTS
 
     if held_out_set not in HELD_OUT_SETS:

@@ -1,6 +1,6 @@
 """`quaddance eval`: run a policy over many songs and motions (no video) and report.
 
-Held-out sets to run it on are written by `quaddance.bench.heldout`.
+Held-out sets to run it on are written by `quaddance.play.heldout`.
 """
 
 from __future__ import annotations

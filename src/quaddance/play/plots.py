@@ -37,7 +37,9 @@ def preload() -> None:
     import matplotlib.figure  # noqa: F401
 
 
-def _save(fig: Any, path: str | Path) -> None:
+def save_figure(fig: Any, path: str | Path) -> None:
+    """Write ``fig`` to ``path`` (format from its suffix, png without one) atomically, at
+    `DPI`."""
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=DPI, format=Path(path).suffix.lstrip(".") or "png")
 
@@ -129,7 +131,7 @@ def plot_feet(
             ax.set_xlim(time[0], time[-1])
     if title:
         fig.suptitle(title)
-    _save(fig, path)
+    save_figure(fig, path)
     return Path(path)
 
 
@@ -233,7 +235,7 @@ def plot_eval(path: str | Path, rows: Sequence[Mapping[str, Any]]) -> Path:
     axes[3].set_ylim(0.0, 1.0)
     axes[3].set_xticks(x, names, rotation=20, ha="right")
     axes[3].grid(axis="y", alpha=0.3)
-    _save(fig, path)
+    save_figure(fig, path)
     return Path(path)
 
 
@@ -271,5 +273,5 @@ def plot_learning_curve(path: str | Path, curve_csv: str | Path) -> Path:
     )
     top.set_xlabel("wall-clock minutes of training")
     fig.tight_layout()
-    _save(fig, path)
+    save_figure(fig, path)
     return Path(path)
