@@ -14,7 +14,7 @@ import torch
 from scipy.signal import find_peaks
 from typer.testing import CliRunner
 
-from quaddance.bench import envelope
+from benchmarks import envelope
 from quaddance.choreo.motion import load_motion
 from quaddance.cli import app
 from quaddance.music.synth import render_song

@@ -445,6 +445,27 @@ def test_every_command_has_working_help() -> None:
         assert result.exit_code == 0 and "Usage" in result.output, (path, result.output)
 
 
+@pytest.mark.parametrize(
+    "args", [["bench"], ["bench", "reach", "--height", "0.1"], ["bench", "--help"]]
+)
+def test_bench_outside_a_checkout_is_one_line_and_exit_2(args, tmp_path, monkeypatch, capsys):
+    """A wheel install has no benchmarks/ beside its package: `quaddance bench ...` says so
+    in one line, whatever follows it."""
+    import quaddance.cli as cli
+    from quaddance.cli.bench import MISSING, add_bench
+
+    wheel = typer.Typer()
+    wheel.command("dance")(lambda: None)
+    add_bench(wheel, root=tmp_path)  # no benchmarks/ there
+    monkeypatch.setattr(cli, "app", wheel)
+    monkeypatch.setattr(sys, "argv", ["quaddance", *args])
+    with pytest.raises(SystemExit) as stop:
+        cli.main()
+    assert stop.value.code == 2
+    err = capsys.readouterr().err
+    assert err == f"quaddance: error: {MISSING}\n"
+
+
 # --- dance.npz ----------------------------------------------------------------------------------
 
 

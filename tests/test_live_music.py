@@ -10,12 +10,13 @@ import threading
 import time
 import types
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import pytest
 import soundfile as sf
 
+from benchmarks.live import LiveSong
 from quaddance.errors import InputFileError, QuaddanceError
 from quaddance.music.audio import load_audio
 from quaddance.music.live import ArraySource, FileSource, MicSource, track_samples
@@ -29,10 +30,8 @@ from quaddance.music.online_beats import (
     SWING_BEATS,
     BeatEvent,
     OnlineBeatTracker,
+    TrackerState,
 )
-
-if TYPE_CHECKING:
-    from quaddance.bench.live import LiveSong
 
 HIT_WINDOW_S = 0.07
 """Beats count as right within +-70 ms (the F-measure window)."""
@@ -66,14 +65,12 @@ def _click_track(
 
 def _track(
     y: np.ndarray, block_s: float = BLOCK_S, song_start: bool = True
-) -> tuple[list[BeatEvent], list[tuple[float, bool, float]], OnlineBeatTracker]:
-    tracker = OnlineBeatTracker(song_start=song_start)
-    events: list[BeatEvent] = []
-    locks: list[tuple[float, bool, float]] = []  # (song time, locked, tempo BPM)
-    for block in ArraySource(y, SR_HZ, block_s=block_s):
-        events += tracker.update(block.samples, block.t_end_s)
-        locks.append((block.t_end_s, tracker.state.locked, tracker.state.tempo_bpm))
-    return events, locks, tracker
+) -> tuple[list[BeatEvent], list[tuple[float, bool, float]], TrackerState]:
+    """`track_samples` of ``y``: (beats, (song time, locked, tempo BPM) after each block,
+    the final state)."""
+    track = track_samples(y, song_start=song_start, block_s=block_s)
+    per_block = (track.block_end_s.tolist(), track.locked.tolist(), track.tempo_bpm.tolist())
+    return list(track.beats), list(zip(*per_block, strict=True)), track.final
 
 
 def _first_lock_s(locks: list[tuple[float, bool, float]], after_s: float = 0.0) -> float:
@@ -259,14 +256,14 @@ def test_mic_source_that_stops_delivering_is_an_error(monkeypatch: pytest.Monkey
 )
 def test_tracker_locks_on_a_click_track_within_6_s(bpm: float, block_s: float) -> None:
     y, ref = _click_track([(bpm, 14.0)])
-    events, locks, tracker = _track(y, block_s)
+    events, locks, final = _track(y, block_s)
     lock_s = _first_lock_s(locks)
     assert lock_s <= 6.0
     errors = _errors_s(events, ref, lock_s, ref[-1])
     assert len(errors) >= round((ref[-1] - lock_s) * bpm / 60.0) - 1  # no beat left out
     assert errors.max() <= HIT_WINDOW_S
-    assert tracker.state.tempo_bpm == pytest.approx(bpm, rel=0.02)
-    assert tracker.state.locked and tracker.state.lock_s == pytest.approx(lock_s, abs=0.02)
+    assert final.tempo_bpm == pytest.approx(bpm, rel=0.02)
+    assert final.locked and final.lock_s == pytest.approx(lock_s, abs=0.02)
     # Beats are reported as soon as the audio reaches them, never later than LATENCY_S.
     assert all(0.0 <= e.reported_s - e.time_s <= LATENCY_S for e in events)
 
@@ -342,12 +339,12 @@ def test_tracker_predicts_the_next_beat_and_downbeat() -> None:
 def test_tracker_relocks_after_a_tempo_change() -> None:
     y, ref = _click_track([(100.0, 10.0), (132.0, 14.0)])
     change_s = 10.5
-    events, locks, tracker = _track(y)
+    events, locks, final = _track(y)
     assert _first_lock_s(locks) <= 6.0
     # Locked on the new tempo within a few seconds of the change, then on the new beats.
     relock_s = min(t for t, locked, bpm in locks if t > change_s and locked and bpm > 128.0)
     assert relock_s - change_s <= 8.0
-    assert tracker.state.tempo_bpm == pytest.approx(132.0, rel=0.02)
+    assert final.tempo_bpm == pytest.approx(132.0, rel=0.02)
     errors = _errors_s(events, ref, change_s + 8.0, ref[-1])
     assert len(errors) >= 8 and errors.max() <= HIT_WINDOW_S
 
@@ -359,9 +356,9 @@ def test_tracker_takes_the_new_phase_after_a_tempo_change_down() -> None:
     from quaddance.music.synth import render_song
 
     y, truth = render_song(132.0, 30.0, seed=7, sr=SR_HZ, tempo_change=(14.0, 108.0))
-    events, _, tracker = _track(y)
-    assert tracker.state.locked
-    assert tracker.state.tempo_bpm == pytest.approx(108.0, rel=0.02)
+    events, _, final = _track(y)
+    assert final.locked
+    assert final.tempo_bpm == pytest.approx(108.0, rel=0.02)
     errors = _errors_s(events, truth.beats_s, 22.0, truth.beats_s[-1])
     assert len(errors) >= 12 and errors.max() <= HIT_WINDOW_S
 
@@ -394,13 +391,13 @@ def test_tracker_keeps_the_beat_when_loud_off_beat_hats_come_in() -> None:
         if mid_s >= hats_from_s:
             i = round(mid_s * SR_HZ)
             y[i : i + len(hat)] += hat[: len(y) - i].astype(np.float32)
-    events, locks, tracker = _track(y)
+    events, locks, final = _track(y)
     assert _first_lock_s(locks) <= 6.0
     errors = _errors_s(events, ref, hats_from_s + 2.0, ref[-1])
     assert len(errors) >= round((ref[-1] - hats_from_s - 2.0) * bpm / 60.0) - 1
     assert errors.max() <= HIT_WINDOW_S
     assert all(locked for t, locked, _ in locks if hats_from_s <= t <= ref[-1])
-    assert tracker.state.tempo_bpm == pytest.approx(bpm, rel=0.02)
+    assert final.tempo_bpm == pytest.approx(bpm, rel=0.02)
 
 
 def test_tracker_moves_off_swung_off_beats_onto_the_beat() -> None:
@@ -418,7 +415,7 @@ def test_tracker_moves_off_swung_off_beats_onto_the_beat() -> None:
     for beat_s in ref:
         i = round((beat_s + swing_at * period_s) * SR_HZ)
         y[i : i + len(hat)] += hat[: max(0, len(y) - i)].astype(np.float32)
-    events, locks, tracker = _track(y)
+    events, locks, final = _track(y)
     assert _first_lock_s(locks) <= 6.0
     # Locked on the hats before the kicks come in (what the test is about).
     hats = ref + swing_at * period_s
@@ -427,7 +424,7 @@ def test_tracker_moves_off_swung_off_beats_onto_the_beat() -> None:
     errors = _errors_s(events, ref, moved_by_s, ref[-1])
     assert len(errors) >= round((ref[-1] - moved_by_s) / period_s) - 1
     assert errors.max() <= HIT_WINDOW_S
-    assert tracker.state.tempo_bpm == pytest.approx(bpm, rel=0.02)
+    assert final.tempo_bpm == pytest.approx(bpm, rel=0.02)
 
 
 def _tuning_midi_song(name: str, tmp_path: Path) -> LiveSong:
@@ -435,25 +432,25 @@ def _tuning_midi_song(name: str, tmp_path: Path) -> LiveSong:
     fluidsynth; the test is skipped without it."""
     import shutil
 
-    from quaddance.bench.beats import BENCH_SONGS, _cached_midi_song, find_soundfont
-    from quaddance.bench.live import _live_song, live_tuning_midi_specs
+    from benchmarks.beats import BENCH_SONGS, cached_midi_song, find_soundfont
+    from benchmarks.live import live_tuning_midi_specs
 
     if shutil.which("fluidsynth") is None:
         pytest.skip("needs fluidsynth (scripts/setup.sh installs it)")
     spec = next(s for s in (*BENCH_SONGS, *live_tuning_midi_specs()) if s.name == name)
-    song, _ = _cached_midi_song(spec, "tuning", find_soundfont(), SR_HZ, tmp_path)
-    return _live_song(song)
+    song, _ = cached_midi_song(spec, "tuning", find_soundfont(), SR_HZ, tmp_path)
+    return LiveSong.from_bench_song(song)
 
 
 def _assert_locks_and_tracks(song: LiveSong, bpm: float, song_start: bool = True) -> float:
     """Locked within 6 s, then at least 95 % of the beats on the song's beats; the lock's time."""
-    events, locks, tracker = _track(song.y, song_start=song_start)
+    events, locks, final = _track(song.y, song_start=song_start)
     lock_s = _first_lock_s(locks)
     assert lock_s <= 6.0
     errors = _errors_s(events, song.beats_s, lock_s, song.beats_s[-1])
     assert len(errors) >= round((song.beats_s[-1] - lock_s) * bpm / 60.0) - 2
     assert np.mean(errors <= HIT_WINDOW_S) >= 0.95
-    assert tracker.state.tempo_bpm == pytest.approx(bpm, rel=0.02)
+    assert final.tempo_bpm == pytest.approx(bpm, rel=0.02)
     return lock_s
 
 
@@ -484,7 +481,7 @@ def test_tracker_joining_a_song_on_its_skank_moves_onto_the_beat_by_the_lock(
     the skank chords on the off-beats, and the tracker locked on them and kept them to the
     end. The bass line changes pitch on the beats, and the off-beat test on the heard grid
     (`analysis.offbeat_harmony`) moves the grid at the lock."""
-    from quaddance.bench.live import join_mid_song
+    from benchmarks.live import join_mid_song
 
     joined, _ = join_mid_song(_tuning_midi_song("skank_132_sync", tmp_path), SR_HZ)
     _assert_locks_and_tracks(joined, 132.0)
@@ -496,11 +493,11 @@ def test_tracker_joining_a_song_follows_the_listener_that_trusts_no_first_sound(
     start) has heard an off-beat first and locks only after 6 s. Once `FALLBACK_S` of music
     has passed, the tracker follows the other listener, whose running means start evenly and
     which is locked by then, on the song's beats."""
-    from quaddance.bench.beats import SYNTH_SONGS, synth_song
-    from quaddance.bench.live import _live_song, join_mid_song
+    from benchmarks.beats import SYNTH_SONGS, synth_song
+    from benchmarks.live import join_mid_song
 
     spec = next(s for s in SYNTH_SONGS if s["name"] == "synth_84_swing")
-    joined, _ = join_mid_song(_live_song(synth_song(spec, SR_HZ)), SR_HZ)
+    joined, _ = join_mid_song(LiveSong.from_bench_song(synth_song(spec, SR_HZ)), SR_HZ)
     tracker = OnlineBeatTracker()
     first_locked: list[tuple[float, bool]] = []
     for block in ArraySource(joined.y, SR_HZ):
@@ -518,7 +515,7 @@ def test_tracker_that_may_join_music_playing_does_not_trust_its_first_sound(
     heard (an off-beat) for a downbeat, and it dances on the off-beats to the end; told that
     the music may already be playing (``song_start=False``, as `live` is from a microphone),
     it follows the listener whose means start evenly, on the beats."""
-    from quaddance.bench.live import join_mid_song
+    from benchmarks.live import join_mid_song
 
     joined, _ = join_mid_song(_tuning_midi_song("tune_skank_118", tmp_path), SR_HZ)
     events, locks, _ = _track(joined.y)  # what the test is about: off the beat
@@ -537,7 +534,7 @@ def test_tracker_that_may_join_music_trusts_the_first_sound_after_a_silence(
     playing reports the same beats as one told that the audio starts with the song. The
     tuning song piano_72_arpeggio, whose off-beat arpeggio notes put the listener with evenly
     started means on them at double tempo."""
-    from quaddance.bench.beats import metrical_level_f_measure
+    from benchmarks.beats import metrical_level_f_measure
 
     song = _tuning_midi_song("piano_72_arpeggio", tmp_path)
     silence_s = 2.0
@@ -561,13 +558,13 @@ def test_tracker_hears_music_after_a_silence_as_from_the_streams_start() -> None
     y, _ = _click_track([(100.0, 12.0)], start_s=0.0)  # a click at the first sample
     # 2 s of -90 dBFS hiss, whole frames (the same frame grid)
     silence = 3e-5 * np.random.default_rng(0).standard_normal(172 * HOP).astype(np.float32)
-    from_file, _, file_tracker = _track(y, song_start=True)
-    from_mic, _, tracker = _track(np.concatenate([silence, y]), song_start=False)
+    from_file, _, file_final = _track(y, song_start=True)
+    from_mic, _, final = _track(np.concatenate([silence, y]), song_start=False)
     assert len(from_file) >= 15
     shift_s = len(silence) / SR_HZ
     assert [e.time_s + shift_s for e in from_file] == pytest.approx([e.time_s for e in from_mic])
     assert [e.beat_in_bar for e in from_file] == [e.beat_in_bar for e in from_mic]
-    assert tracker.state.lock_s == pytest.approx(shift_s + file_tracker.state.lock_s)
+    assert final.lock_s == pytest.approx(shift_s + file_final.lock_s)
 
 
 def test_tracker_loses_lock_in_silence_and_finds_the_music_again() -> None:
@@ -597,10 +594,10 @@ def test_tracker_loses_lock_in_silence_and_finds_the_music_again() -> None:
 def test_tracker_stays_unlocked_in_silence() -> None:
     y = np.zeros(8 * SR_HZ, dtype=np.float32)
     y[SR_HZ // 2 :: SR_HZ // 3] = 1e-5  # -100 dBFS ticks: still silence
-    events, locks, tracker = _track(y)
+    events, locks, final = _track(y)
     assert not any(locked for _, locked, _ in locks)
     assert not events
-    assert np.isnan(tracker.state.lock_s)
+    assert np.isnan(final.lock_s)
 
 
 @pytest.mark.parametrize("colour", ["white", "pink", "brown"])
@@ -608,7 +605,7 @@ def test_tracker_stays_unlocked_in_steady_noise(colour: str) -> None:
     """Noise has onset peaks everywhere and, over a few seconds, some periodicity by chance
     (it locked 18 of 18 clips from the stream's start); its flux is steady, music's comes in
     bursts (`BURSTY_CV`). From the stream's start and after a silence (as a song would be)."""
-    from quaddance.bench.live import noise_clip
+    from benchmarks.live import noise_clip
 
     for seed in range(2):
         y = noise_clip(colour, seed, 10.0, SR_HZ)
@@ -618,7 +615,7 @@ def test_tracker_stays_unlocked_in_steady_noise(colour: str) -> None:
 
 
 def test_tracker_locks_on_music_with_noise_10_db_below_it() -> None:
-    from quaddance.bench.live import noise_clip
+    from benchmarks.live import noise_clip
 
     y, ref = _click_track([(110.0, 12.0)])
     rms = float(np.sqrt(np.mean(y.astype(float) ** 2)))
@@ -640,15 +637,15 @@ def test_tracker_keeps_the_true_tempo_through_syncopation_and_after_a_break() ->
     3+3+2 accents pull the tempo estimate to 2/3 (85 BPM), which the locked tracker must not
     follow (`HELD_LEVEL_RATIOS`); after 2.2 s of silence the second part is first heard at
     half tempo (64 BPM), until its snare backbeat doubles it (`analysis.backbeat_heard`)."""
-    from quaddance.bench.live import live_songs
+    from benchmarks.live import live_songs
 
     song = next(s for s in live_songs(SR_HZ, midi=False) if s.name == "live_128_break_phase")
-    events, locks, tracker = _track(song.y)
+    events, locks, final = _track(song.y)
     part2_s = song.music_starts_s[1]
     part1 = [bpm for t, locked, bpm in locks if locked and t < part2_s - 2.2]
     assert _first_lock_s(locks) <= 6.0
     assert part1 and all(bpm == pytest.approx(128.0, rel=0.03) for bpm in part1)
-    assert tracker.state.tempo_bpm == pytest.approx(128.0, rel=0.03)
+    assert final.tempo_bpm == pytest.approx(128.0, rel=0.03)
     late = [e for e in events if e.time_s >= song.beats_s[-1] - 4.0]
     assert len(late) >= 7  # 4 s of beats at 128 BPM, not at 64
     errors = _errors_s(events, song.beats_s, song.beats_s[-1] - 4.0, song.beats_s[-1])
@@ -661,7 +658,7 @@ def test_bench_live_sets_are_what_their_names_say(tmp_path: Path) -> None:
     is refused in one line."""
     import shutil
 
-    from quaddance.bench.live import bench_live_tracker, live_case_songs
+    from benchmarks.live import bench_live_tracker, live_case_songs
     from quaddance.errors import QuaddanceError
 
     if shutil.which("fluidsynth") is None:
@@ -693,7 +690,7 @@ def test_bench_live_sets_are_what_their_names_say(tmp_path: Path) -> None:
 
 
 def test_bench_live_noise_clips_have_their_colour_and_level() -> None:
-    from quaddance.bench.live import NOISE_COLOURS, noise_clip
+    from benchmarks.live import NOISE_COLOURS, noise_clip
 
     slopes = []
     for colour in NOISE_COLOURS:
@@ -710,12 +707,12 @@ def test_bench_live_noise_clips_have_their_colour_and_level() -> None:
 
 
 def test_bench_live_scores_a_song_heard_after_a_quiet_room_in_song_time() -> None:
-    from quaddance.bench.live import MIC_LEAD_S, _online_scores
+    from benchmarks.live import MIC_LEAD_S, online_scores
 
     y, ref = _click_track([(120.0, 10.0)], start_s=0.0)
     lead = np.zeros(round(MIC_LEAD_S * SR_HZ), dtype=np.float32)
-    lock_alone_s, f_alone = _online_scores(y, ref, SR_HZ, song_start=True)
-    lock_s, f = _online_scores(
+    lock_alone_s, f_alone = online_scores(y, ref, SR_HZ, song_start=True)
+    lock_s, f = online_scores(
         np.concatenate([lead, y]), ref, SR_HZ, song_start=False, lead_s=MIC_LEAD_S
     )
     assert lock_alone_s is not None and lock_s is not None
@@ -732,18 +729,18 @@ def test_bench_live_shifts_scores_each_song_moved_within_a_frame(
 
     from typer.testing import CliRunner
 
-    from quaddance.bench import live as bench_live
+    import benchmarks.live as bench_live
     from quaddance.cli import app
 
     y, ref = _click_track([(120.0, 12.0)])
     song = bench_live.LiveSong("clicks_120", "heldout", y, ref, ref[::4])
     joined, _ = bench_live.join_mid_song(song, SR_HZ)
-    more = bench_live._shifted_scores(song, joined, SR_HZ, 3)
+    more = bench_live.shifted_scores(song, joined, SR_HZ, 3)
     assert {k: len(v) for k, v in more.items()} == dict.fromkeys(bench_live.SHIFTED_KEYS, 2)
     assert min(more["f_online"]) >= 0.95 and min(more["join_f_online"]) >= 0.9
     # Scored in song time (the lead of silence is told to the scorer): a click track locks
     # at the same beat whatever the shift, within a frame (11.6 ms; the shifts are 4 and 8 ms).
-    alone_s, _ = bench_live._online_scores(y, ref, SR_HZ, song_start=True)
+    alone_s, _ = bench_live.online_scores(y, ref, SR_HZ, song_start=True)
     assert np.ptp([alone_s, *more["lock_s"]]) <= 0.012
 
     monkeypatch.setattr(bench_live, "live_case_songs", lambda sets, sr, cache_dir: [song])
@@ -770,7 +767,7 @@ def test_bench_live_joins_songs_mid_song_between_beats() -> None:
     """`bench live` also scores each song joined a third in, 0.37 of a beat after a beat: the
     tracker hears neither the song's start (every bench song starts on its first downbeat)
     nor a beat first. The joined song's times count from the join."""
-    from quaddance.bench.live import JOIN_PHASE_BEATS, LiveSong, join_mid_song
+    from benchmarks.live import JOIN_PHASE_BEATS, join_mid_song
 
     sr = 1000
     beats = np.arange(0.5, 29.0, 0.5)  # 120 BPM for 30 s, a 2 s break at 14-16 s
@@ -793,22 +790,22 @@ def test_bench_live_scores_each_part_of_a_song_with_a_break_at_its_own_level() -
     metrical level (double time before the break and the beat after it is a perfect score),
     after the lock, and the parts' F are weighted by their beats; a song without a break is
     scored as `metrical_level_f_measure` scores it."""
-    from quaddance.bench.beats import metrical_level_f_measure
-    from quaddance.bench.live import _f_after
+    from benchmarks.beats import metrical_level_f_measure
+    from benchmarks.live import f_after
 
     part1 = np.arange(0.5, 14.0, 0.6)  # 100 BPM, then a break at 14-16 s
     part2 = np.arange(16.0, 30.0, 0.5)  # 120 BPM
     ref = np.concatenate([part1, part2])
     double1 = np.arange(0.5, 14.0, 0.3)
     est = np.concatenate([double1, part2])
-    assert _f_after(ref, est, 0.0, (0.0, 16.0)) == pytest.approx(1.0)
+    assert f_after(ref, est, 0.0, (0.0, 16.0)) == pytest.approx(1.0)
     assert metrical_level_f_measure(ref, est) < 0.9  # one level for the whole song
     # Part 2 at the wrong phase (off-beats): weighted by beats, after the lock at 5.2 s.
     off2 = part2 + 0.25
     est = np.concatenate([double1, off2])
     n1, n2 = np.sum(part1 >= 5.2), len(part2)
-    assert _f_after(ref, est, 5.2, (0.0, 16.0)) == pytest.approx(n1 / (n1 + n2))
-    assert _f_after(ref, est, 5.2) == pytest.approx(
+    assert f_after(ref, est, 5.2, (0.0, 16.0)) == pytest.approx(n1 / (n1 + n2))
+    assert f_after(ref, est, 5.2) == pytest.approx(
         metrical_level_f_measure(ref[ref >= 5.2], est[est >= 5.2])
     )
 
@@ -817,8 +814,8 @@ def test_bench_live_tuning_additions_are_new_songs() -> None:
     """The songs `bench live` adds to its tuning set are other songs than those of the sets it
     reports (no name, and no tempo + rhythms + seed, shared with the untuned or random sets),
     and cover the untuned set's kinds of drum pattern that do not mark the beat."""
-    from quaddance.bench.beats import UNTUNED_SONGS, random_midi_songs
-    from quaddance.bench.live import (
+    from benchmarks.beats import UNTUNED_SONGS, random_midi_songs
+    from benchmarks.live import (
         HELDOUT_SYNTH_SONGS,
         LIVE_SYNTH_SONGS,
         LIVE_TUNING_MIDI_SONGS,
@@ -851,12 +848,11 @@ def test_bench_live_tuning_additions_are_new_songs() -> None:
 def test_bench_live_whole_loop_tuning_songs_are_tuning_songs(monkeypatch) -> None:
     """`bench live --sets tuning` runs the whole loop on `LIVE_DANCE_TUNING_SONGS`: songs of
     the tuning set only (the live choreographer is tuned on them), none of a reported set."""
-    import quaddance.bench.live as bench_live
-    from quaddance.bench.beats import BENCH_SONGS, EXTRA_TUNING_SONGS, SYNTH_SONGS
-    from quaddance.bench.live import (
+    import benchmarks.live as bench_live
+    from benchmarks.beats import BENCH_SONGS, EXTRA_TUNING_SONGS, SYNTH_SONGS
+    from benchmarks.live import (
         LIVE_DANCE_TUNING_SONGS,
         LIVE_TUNING_SYNTH_SONGS,
-        LiveSong,
         live_dance_songs,
         live_tuning_midi_specs,
     )
@@ -873,7 +869,7 @@ def test_bench_live_whole_loop_tuning_songs_are_tuning_songs(monkeypatch) -> Non
     half = len(tuning) // 2
     names = sorted(tuning)
     monkeypatch.setattr(
-        bench_live, "_beat_songs", lambda *a, **k: [stand_in(n) for n in names[:half]]
+        bench_live, "beat_songs", lambda *a, **k: [stand_in(n) for n in names[:half]]
     )
     monkeypatch.setattr(
         bench_live, "live_tuning_songs", lambda *a, **k: [stand_in(n) for n in names[half:]]

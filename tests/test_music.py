@@ -12,7 +12,7 @@ import pytest
 import soundfile as sf
 from typer.testing import CliRunner
 
-from quaddance.bench.beats import (
+from benchmarks.beats import (
     BENCH_SONGS,
     EXTRA_TUNING_SONGS,
     INSTALL_HINT,
@@ -342,7 +342,7 @@ def test_bench_midi_notes_all_end_even_when_swing_overtakes_the_next_note(tmp_pa
 def test_bench_midi_render_that_never_ends_fails_clearly(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    import quaddance.bench.beats as beats
+    import benchmarks.beats as beats
 
     def endless(cmd: list[str], **kwargs: object) -> None:
         Path(cmd[cmd.index("-F") + 1]).write_bytes(b"RIFF")  # the partial file

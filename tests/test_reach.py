@@ -9,15 +9,15 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from quaddance.cli import app
-from quaddance.errors import QuaddanceError
-from quaddance.sim.reach import (
+from benchmarks.reach import (
     ReachCfg,
-    _closest_point_in_triangle,
-    _shrunk_triangle,
+    closest_point_in_triangle,
     kinematic_reach,
     measure_reach,
+    shrunk_triangle,
 )
+from quaddance.cli import app
+from quaddance.errors import QuaddanceError
 
 # Heights from the issue: 5 cm is a small dance tap; 60 cm is above the trunk (about 0.32 m)
 # plus a whole folded leg, out of any reach.
@@ -93,19 +93,19 @@ def test_kinematic_bound_is_mirror_symmetric() -> None:
 
 def test_support_triangle_helpers() -> None:
     tri = np.array([[0.17, -0.16], [-0.27, -0.16], [-0.27, 0.16]])
-    inner = _shrunk_triangle(tri, 0.03)
+    inner = shrunk_triangle(tri, 0.03)
     # Every inner vertex lies 3 cm inside the two edges that meet at the outer one.
     assert inner[0, 1] == pytest.approx(-0.13) and inner[2, 0] == pytest.approx(-0.24)
     centre = tri.mean(axis=0)
-    assert np.allclose(_closest_point_in_triangle(centre, inner), centre)
+    assert np.allclose(closest_point_in_triangle(centre, inner), centre)
     outside = np.array([0.0, 0.0])  # the standing CoM, on the lifted foot's side
-    moved = _closest_point_in_triangle(outside, inner)
+    moved = closest_point_in_triangle(outside, inner)
     # Lands on the inner diagonal, i.e. 3 cm inside the outer diagonal.
     edge = tri[2] - tri[0]
     inward = np.array([-edge[1], edge[0]]) / np.linalg.norm(edge)
     assert np.dot(moved - tri[0], inward) == pytest.approx(0.03)
     with pytest.raises(QuaddanceError, match="com_margin_m"):
-        _shrunk_triangle(tri, 0.5)
+        shrunk_triangle(tri, 0.5)
 
 
 def test_bad_arguments_are_user_errors() -> None:

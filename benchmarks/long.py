@@ -74,7 +74,11 @@ def _write_silent_hours(path: str | Path, duration_s: float, sr: int = 8000) -> 
 
 
 def _make_in_child(writer: str, path: Path, duration_s: float) -> None:
-    code = f"from quaddance.bench.long import {writer}; {writer}({str(path)!r}, {duration_s!r})"
+    root = str(Path(__file__).resolve().parents[1])  # the checkout that holds benchmarks/
+    code = (
+        f"import sys; sys.path.insert(0, {root!r}); from benchmarks.long import {writer}; "
+        f"{writer}({str(path)!r}, {duration_s!r})"
+    )
     subprocess.run([sys.executable, "-c", code], check=True)
 
 

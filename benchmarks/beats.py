@@ -574,7 +574,7 @@ class BenchSong:
     spec: MidiSongSpec | dict[str, Any]  # the MIDI song, or render_song's arguments + name
 
 
-def _cached_midi_song(
+def cached_midi_song(
     spec: MidiSongSpec, set_name: str, soundfont: Path, sr: int, cache_dir: Path
 ) -> tuple[BenchSong, Path]:
     """Write and render ``spec`` (or reuse the rendering cached under ``cache_dir``); return the
@@ -611,7 +611,7 @@ def _wav_at(song: BenchSong, soundfont: Path, sr: int, cache_dir: Path) -> Path:
     import soundfile as sf
 
     if isinstance(song.spec, MidiSongSpec):
-        return _cached_midi_song(song.spec, song.set, soundfont, sr, cache_dir)[1]
+        return cached_midi_song(song.spec, song.set, soundfont, sr, cache_dir)[1]
     path = cache_dir.resolve() / f"{song.name}-synth-{sr}.wav"
     if not path.is_file():
         y = synth_song(song.spec, sr).y
@@ -640,7 +640,7 @@ def bench_songs(
         specs += [(spec, "random") for spec in random_midi_songs(n_random)]
     if "untuned" in sets:
         specs += [(spec, "untuned") for spec in UNTUNED_SONGS]
-    songs = [_cached_midi_song(spec, name, soundfont, sr, cache_dir)[0] for spec, name in specs]
+    songs = [cached_midi_song(spec, name, soundfont, sr, cache_dir)[0] for spec, name in specs]
     if "tuning" in sets:
         songs += [synth_song(spec, sr) for spec in SYNTH_SONGS]
     return songs

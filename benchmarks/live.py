@@ -1,15 +1,15 @@
 """Online beat tracking against the offline analyser, on songs with exactly known beats.
 
-Each song is fed through ``FileSource(realtime=False)`` and the ``OnlineBeatTracker`` block by
-block, exactly as ``quaddance live --from-file`` does it but without waiting for the wall
-clock. Per song: ``lock_s`` (the first stable lock), the online beat F-measure after the lock
-(+-70 ms, at the tracker's own metrical level, as ``bench beats`` scores, each part of a song
-with silent breaks at its own level: `_f_after`), the offline analyser's F-measure over the
-same span of the same song, and their difference.
+Each song is fed to the ``OnlineBeatTracker`` block by block by `track_samples`
+(``quaddance.music.live``), exactly as ``quaddance live --from-file`` does it but without
+waiting for the wall clock. Per song: ``lock_s`` (the first stable lock), the online beat
+F-measure after the lock (+-70 ms, at the tracker's own metrical level, as ``bench beats``
+scores, each part of a song with silent breaks at its own level: `f_after`), the offline
+analyser's F-measure over the same span of the same song, and their difference.
 
 Song sets (``LIVE_SETS``): ``random`` and ``untuned`` are the beat benchmark's sets
-(``bench/beats.py``) that the online tracker was never tuned on (its settings were set on the
-``tuning`` set and on click tracks); ``live`` holds songs made here for the live case: a tempo
+(``benchmarks/beats.py``) that the online tracker was never tuned on (its settings were set on
+the ``tuning`` set and on click tracks); ``live`` holds songs made here for the live case: a tempo
 change and breaks of silence after which the music comes back at another tempo or phase. It
 is no longer unseen: the tracker's level hold and backbeat test came from a failure on one of
 its first three songs, and its last four (a first held-out set) showed the live choreographer's
@@ -24,7 +24,6 @@ above.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from quaddance.bench.beats import (
+from benchmarks.beats import (
     F_MEASURE_WINDOW_S,
     BenchSong,
     MidiSongSpec,
@@ -41,14 +40,15 @@ from quaddance.bench.beats import (
     metrical_level_f_measure,
     song_spec,
 )
-from quaddance.bench.beats import SETS as BEAT_SETS
+from benchmarks.beats import SETS as BEAT_SETS
 from quaddance.errors import QuaddanceError
+from quaddance.music.live import OnlineTrack, track_samples
 
 LIVE_CASE_SETS = ("live", "heldout")
 """The sets of live-case songs (`live_case_songs`), which the whole live loop is run on."""
 
 LIVE_SETS = (*BEAT_SETS, *LIVE_CASE_SETS)
-"""``tuning``, ``random``, ``untuned`` (``bench/beats.py``), ``live`` (``live_songs``) and
+"""``tuning``, ``random``, ``untuned`` (``benchmarks/beats.py``), ``live`` (``live_songs``) and
 ``heldout`` (``heldout_songs``)."""
 
 DEFAULT_SETS = ("random", "untuned", "live", "heldout")
@@ -68,6 +68,12 @@ class LiveSong:
     beats_s: np.ndarray  # (n_beats,) exact beat times, s (none inside a silent break)
     downbeats_s: np.ndarray  # (n_bars,) exact downbeat times, s
     music_starts_s: tuple[float, ...] = (0.0,)  # where the music (re)starts after silence
+
+    @classmethod
+    def from_bench_song(cls, song: BenchSong) -> LiveSong:
+        """A song of the beat benchmark (``benchmarks/beats.py``): every one is in 4/4 and
+        starts on a downbeat."""
+        return cls(song.name, song.set, song.y, song.beats_s, song.beats_s[::4])
 
 
 def _concat_with_breaks(
@@ -223,7 +229,7 @@ def live_tuning_midi_specs() -> list[MidiSongSpec]:
     `LIVE_TUNING_MIDI_SONGS` and the renamed `LIVE_TUNING_RANDOM` songs."""
     import dataclasses
 
-    from quaddance.bench.beats import random_midi_songs
+    from benchmarks.beats import random_midi_songs
 
     randoms = [
         dataclasses.replace(s, name=f"tune_r{seed}_{s.name}")
@@ -235,11 +241,11 @@ def live_tuning_midi_specs() -> list[MidiSongSpec]:
 
 def live_tuning_songs(sr: int, cache_dir: Path = Path("benchmarks/cache")) -> list[LiveSong]:
     """This benchmark's additions to the ``tuning`` set (see `LIVE_TUNING_MIDI_SONGS`)."""
-    from quaddance.bench.beats import _cached_midi_song, find_soundfont
+    from benchmarks.beats import cached_midi_song, find_soundfont
 
     soundfont = find_soundfont()
     out = [
-        _live_song(_cached_midi_song(spec, "tuning", soundfont, sr, cache_dir)[0])
+        LiveSong.from_bench_song(cached_midi_song(spec, "tuning", soundfont, sr, cache_dir)[0])
         for spec in live_tuning_midi_specs()
     ]
     return out + _synth_songs(LIVE_TUNING_SYNTH_SONGS, "tuning", sr)
@@ -272,12 +278,12 @@ def _midi_pair(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[float, ...]]:
     """The first ``keep_s`` of two `random_midi_songs(2, seed)` (rendered, cached), joined by
     ``gap_s`` of silence: another generator than ``music.synth``, real instrument sounds."""
-    from quaddance.bench.beats import _cached_midi_song, find_soundfont, random_midi_songs
+    from benchmarks.beats import cached_midi_song, find_soundfont, random_midi_songs
 
     soundfont = find_soundfont()
     parts = []
     for spec in random_midi_songs(2, seed=seed):
-        midi, _ = _cached_midi_song(spec, "live", soundfont, sr, cache_dir)
+        midi, _ = cached_midi_song(spec, "live", soundfont, sr, cache_dir)
         cut_s = min(keep_s, len(midi.y) / sr)
         parts.append((midi.y[: round(cut_s * sr)], midi.beats_s[midi.beats_s < cut_s]))
     return _concat_with_breaks(parts, gap_s, sr)
@@ -314,7 +320,7 @@ def live_dance_songs(
     with ``tuning``, `LIVE_DANCE_TUNING_SONGS`."""
     songs = live_case_songs(sets, sr, cache_dir)
     if "tuning" in sets:
-        tuning = _beat_songs(("tuning",), sr, 0, cache_dir) + live_tuning_songs(sr, cache_dir)
+        tuning = beat_songs(("tuning",), sr, 0, cache_dir) + live_tuning_songs(sr, cache_dir)
         by_name = {s.name: s for s in tuning}
         songs += [by_name[name] for name in LIVE_DANCE_TUNING_SONGS]
     return songs
@@ -328,47 +334,16 @@ def live_case_songs(
     return songs + (heldout_songs(sr, cache_dir) if "heldout" in sets else [])
 
 
-def _beat_songs(sets: tuple[str, ...], sr: int, n_random: int, cache_dir: Path) -> list[LiveSong]:
+def beat_songs(sets: tuple[str, ...], sr: int, n_random: int, cache_dir: Path) -> list[LiveSong]:
+    """The beat benchmark's songs of ``sets`` (`bench_songs`) as `LiveSong`s."""
     songs = bench_songs(sets, sr=sr, n_random=n_random, cache_dir=cache_dir)
-    return [_live_song(s) for s in songs]
+    return [LiveSong.from_bench_song(s) for s in songs]
 
 
-def _live_song(song: BenchSong) -> LiveSong:
-    # Every beat-bench song is in 4/4 and starts on a downbeat.
-    return LiveSong(song.name, song.set, song.y, song.beats_s, song.beats_s[::4])
-
-
-def track_online(
-    y: np.ndarray, sr: int, song_start: bool = True
-) -> tuple[list[Any], list[tuple[float, bool]], float]:
-    """Feed ``y`` through the live path without real-time pacing; ``song_start`` is the
-    tracker's (False: the music may already be playing, as `live` from a microphone).
-
-    Returns:
-        ``(beats, lock_track, cpu_s)``: the beat events, (song time, locked) after each block,
-        and the tracker's processing time, seconds.
-    """
-    from quaddance.music.live import ArraySource
-    from quaddance.music.online_beats import OnlineBeatTracker
-
-    tracker = OnlineBeatTracker(sr, song_start=song_start)
-    beats: list[Any] = []
-    lock_track: list[tuple[float, bool]] = []
-    cpu_s = 0.0
-    for block in ArraySource(y, sr):
-        t0 = time.perf_counter()
-        beats += tracker.update(block.samples, block.t_end_s)
-        cpu_s += time.perf_counter() - t0
-        lock_track.append((block.t_end_s, tracker.state.locked))
-    return beats, lock_track, cpu_s
-
-
-def _relock_s(lock_track: list[tuple[float, bool]], start_s: float) -> float | None:
+def _relock_s(track: OnlineTrack, start_s: float) -> float | None:
     """Seconds from ``start_s`` to the first locked block at or after it (None if never)."""
-    for t, locked in lock_track:
-        if t >= start_s and locked:
-            return t - start_s
-    return None
+    lock_s = track.first_lock_s(start_s)
+    return None if lock_s is None else lock_s - start_s
 
 
 JOIN_AT = 1.0 / 3.0
@@ -410,7 +385,7 @@ def _score_song(song: LiveSong, sr: int, shifts: int = 1) -> dict[str, Any]:
     (`join_mid_song`) under ``join_`` names; the online tracker's lock and F when a
     microphone heard a quiet room first (``silence_``) and with noise (``noisy_``); and, for
     ``shifts`` > 1, under ``shifted``, its lock and F from the start and joined at each of
-    ``shifts`` offsets within an onset frame (`_shifted_scores`, this row's own first)."""
+    ``shifts`` offsets within an onset frame (`shifted_scores`, this row's own first)."""
     row = _score_from_start(song, sr)
     joined, join_s = join_mid_song(song, sr)
     scores = _score_from_start(joined, sr, song_start=False)
@@ -418,7 +393,7 @@ def _score_song(song: LiveSong, sr: int, shifts: int = 1) -> dict[str, Any]:
     for key in ("lock_s", "f_online", "f_offline", "f_diff"):
         row[f"join_{key}"] = scores[key]
     hiss = noise_clip("white", 0, MIC_LEAD_S, sr) * (MIC_HISS_RMS / NOISE_RMS)
-    row["silence_lock_s"], row["silence_f_online"] = _online_scores(
+    row["silence_lock_s"], row["silence_f_online"] = online_scores(
         np.concatenate([hiss, song.y]),
         song.beats_s,
         sr,
@@ -430,11 +405,11 @@ def _score_song(song: LiveSong, sr: int, shifts: int = 1) -> dict[str, Any]:
     noise = noise_clip("pink", 1, len(song.y) / sr, sr) * (
         rms * 10 ** (-NOISY_SNR_DB / 20) / NOISE_RMS
     )
-    row["noisy_lock_s"], row["noisy_f_online"] = _online_scores(
+    row["noisy_lock_s"], row["noisy_f_online"] = online_scores(
         song.y + noise, song.beats_s, sr, song_start=True, parts_s=song.music_starts_s
     )
     if shifts > 1:
-        more = _shifted_scores(song, joined, sr, shifts)
+        more = shifted_scores(song, joined, sr, shifts)
         row["shifted"] = {key: [row[key], *more[key]] for key in more}
     return row
 
@@ -452,7 +427,7 @@ def _in_gap(f_diff: float) -> bool:
     return f_diff >= -GOAL_F_GAP
 
 
-def _shifted_scores(
+def shifted_scores(
     song: LiveSong, joined: LiveSong, sr: int, shifts: int
 ) -> dict[str, list[float | None]]:
     """The online tracker's lock and F (`SHIFTED_KEYS`) on ``song`` from its start and on
@@ -467,7 +442,7 @@ def _shifted_scores(
     for k in range(1, shifts):
         lead = np.zeros(k * HOP // shifts, dtype=np.float32)
         for prefix, heard, song_start in (("", song, True), ("join_", joined, False)):
-            lock_s, f = _online_scores(
+            lock_s, f = online_scores(
                 np.concatenate([lead, heard.y]),
                 heard.beats_s,
                 sr,
@@ -481,7 +456,7 @@ def _shifted_scores(
 
 
 def _shifted_goals(rows: list[dict[str, Any]], shifts: int) -> dict[str, Any]:
-    """The tracker's goals counted at each shift of `_shifted_scores` and averaged over the
+    """The tracker's goals counted at each shift of `shifted_scores` and averaged over the
     shifts (the F gap against the offline F of the unshifted row)."""
 
     def mean_in_time(key: str) -> float:
@@ -510,7 +485,7 @@ def _shifted_goals(rows: list[dict[str, Any]], shifts: int) -> dict[str, Any]:
     }
 
 
-def _online_scores(
+def online_scores(
     y: np.ndarray,
     beats_s: np.ndarray,
     sr: int,
@@ -518,17 +493,17 @@ def _online_scores(
     lead_s: float = 0.0,
     parts_s: tuple[float, ...] = (0.0,),
 ) -> tuple[float | None, float]:
-    """(lock time, song seconds, or None; F after the lock, `_f_after` over ``parts_s``) of
+    """(lock time, song seconds, or None; F after the lock, `f_after` over ``parts_s``) of
     the online tracker on ``y``, the song whose ``beats_s`` start ``lead_s`` into it."""
-    beats, lock_track, _ = track_online(y, sr, song_start)
-    lock_s = _relock_s(lock_track, lead_s)
+    track = track_samples(y, sr, song_start)
+    lock_s = _relock_s(track, lead_s)
     if lock_s is None:
         return None, 0.0
-    online_s = np.array([b.time_s for b in beats]) - lead_s
-    return round(lock_s, 3), round(_f_after(beats_s, online_s, lock_s, parts_s), 4)
+    online_s = track.beats_s - lead_s
+    return round(lock_s, 3), round(f_after(beats_s, online_s, lock_s, parts_s), 4)
 
 
-def _f_after(
+def f_after(
     ref_s: np.ndarray, est_s: np.ndarray, start_s: float, parts_s: tuple[float, ...] = (0.0,)
 ) -> float:
     """`metrical_level_f_measure` of the beats at or after ``start_s`` (the lock), each part of
@@ -554,12 +529,13 @@ def _f_after(
 def _score_from_start(song: LiveSong, sr: int, song_start: bool = True) -> dict[str, Any]:
     from quaddance.music.analysis import analyze
 
-    beats, lock_track, cpu_s = track_online(song.y, sr, song_start)
+    track = track_samples(song.y, sr, song_start)
+    beats = track.beats
     offline = analyze(song.y, sr)
     offline_s = offline.beats_s
-    online_s = np.array([b.time_s for b in beats])
+    online_s = track.beats_s
     latency_s = max((b.reported_s - b.time_s for b in beats), default=0.0)
-    lock_s = _relock_s(lock_track, 0.0)
+    lock_s = _relock_s(track, 0.0)
     duration_s = len(song.y) / sr
     row: dict[str, Any] = {
         "name": song.name,
@@ -571,8 +547,8 @@ def _score_from_start(song: LiveSong, sr: int, song_start: bool = True) -> dict[
     # same stretch of music; a song that never locks scores 0 online.
     start_s = lock_s if lock_s is not None else duration_s
     parts_s = song.music_starts_s
-    f_online = _f_after(song.beats_s, online_s, start_s, parts_s)
-    f_offline = _f_after(song.beats_s, offline_s, 0.0 if lock_s is None else start_s, parts_s)
+    f_online = f_after(song.beats_s, online_s, start_s, parts_s)
+    f_offline = f_after(song.beats_s, offline_s, 0.0 if lock_s is None else start_s, parts_s)
     # Downbeats: strict F-measure (a bar phase one beat off scores 0), same span.
     true_db = song.downbeats_s[song.downbeats_s >= start_s]
     online_db = np.array([b.time_s for b in beats if b.downbeat and b.time_s >= start_s])
@@ -582,16 +558,16 @@ def _score_from_start(song: LiveSong, sr: int, song_start: bool = True) -> dict[
             "f_online": round(f_online, 4),
             "f_offline": round(f_offline, 4),
             "f_diff": round(f_online - f_offline, 4),
-            "f_online_whole_song": round(_f_after(song.beats_s, online_s, 0.0, parts_s), 4),
+            "f_online_whole_song": round(f_after(song.beats_s, online_s, 0.0, parts_s), 4),
             "f_downbeat_online": round(beat_f_measure(true_db, online_db), 4),
             "f_downbeat_offline": round(beat_f_measure(true_db, offline_db), 4),
             "tempo_bpm_end": round(beats[-1].tempo_bpm, 2) if beats else 0.0,
             "max_report_delay_ms": round(1000.0 * latency_s, 2),
-            "cpu_per_audio_s": round(cpu_s / duration_s, 4),
+            "cpu_per_audio_s": round(track.tracker_s / duration_s, 4),
         }
     )
     if len(song.music_starts_s) > 1:
-        relocks = [_relock_s(lock_track, s) for s in song.music_starts_s[1:]]
+        relocks = [_relock_s(track, s) for s in song.music_starts_s[1:]]
         row["relock_s"] = [None if r is None else round(r, 3) for r in relocks]
     return row
 
@@ -611,7 +587,7 @@ def bench_live_tracker(
         cache_dir: where the beat benchmark keeps its rendered songs.
         progress: called with each song's name before it is scored.
         shifts: also score the online tracker at this many offsets within an onset frame
-            (`_shifted_scores`), with the goals averaged over them (``goals["shifted"]``).
+            (`shifted_scores`), with the goals averaged over them (``goals["shifted"]``).
 
     Returns:
         ``{"songs": [per-song rows], "means": {set: ...}, "goals": {...}, ...}``; a row has
@@ -630,7 +606,7 @@ def bench_live_tracker(
     if unknown:
         raise QuaddanceError(f"unknown live-bench set(s) {sorted(unknown)}; choose {LIVE_SETS}")
     beat_sets = tuple(s for s in sets if s in BEAT_SETS)
-    songs = _beat_songs(beat_sets, SR_HZ, n_random, cache_dir) if beat_sets else []
+    songs = beat_songs(beat_sets, SR_HZ, n_random, cache_dir) if beat_sets else []
     if "tuning" in sets:
         songs += live_tuning_songs(SR_HZ, cache_dir)
     songs += live_case_songs(sets, SR_HZ, cache_dir)
@@ -733,9 +709,10 @@ def noise_locks(sr: int, seeds: int = 6, duration_s: float = 12.0) -> dict[str, 
         ("after_3_s_silence", False, True),
     ):
         tracks = [
-            track_online(np.concatenate([silence, y]) if lead else y, sr, song_start) for y in clips
+            track_samples(np.concatenate([silence, y]) if lead else y, sr, song_start)
+            for y in clips
         ]
-        locked[key] = sum(any(lk for _, lk in track[1]) for track in tracks)
+        locked[key] = sum(bool(track.locked.any()) for track in tracks)
     return {
         "clips": len(clips),
         "duration_s": duration_s,

@@ -128,7 +128,7 @@ def _smoothstep(x: float) -> float:
     return x**3 * (10.0 - 15.0 * x + 6.0 * x * x)
 
 
-def _shrunk_triangle(tri_xy: np.ndarray, margin_m: float) -> np.ndarray:
+def shrunk_triangle(tri_xy: np.ndarray, margin_m: float) -> np.ndarray:
     """Triangle (3, 2) with every edge moved ``margin_m`` inward.
 
     The inner parallel triangle is the original scaled about its incentre by (r - m) / r,
@@ -149,7 +149,7 @@ def _shrunk_triangle(tri_xy: np.ndarray, margin_m: float) -> np.ndarray:
     return incentre + (tri_xy - incentre) * (inradius - margin_m) / inradius
 
 
-def _closest_point_in_triangle(p_xy: np.ndarray, tri_xy: np.ndarray) -> np.ndarray:
+def closest_point_in_triangle(p_xy: np.ndarray, tri_xy: np.ndarray) -> np.ndarray:
     """The point of the triangle (3, 2) nearest to ``p_xy`` (2,); ``p_xy`` if inside."""
     signs = []
     for i in range(3):
@@ -394,7 +394,7 @@ class _ReachRig:
         swing_pref_b_xy = planner.to_trunk_xy(feet_w[self.foot])
         tri_xy = np.array([feet_w[leg][:2] for leg in self.stance_legs])
         com0 = data.subtree_com[1, :2].copy()
-        com_target = _closest_point_in_triangle(com0, _shrunk_triangle(tri_xy, cfg.com_margin_m))
+        com_target = closest_point_in_triangle(com0, shrunk_triangle(tri_xy, cfg.com_margin_m))
         # All four feet stay down while the trunk carries the centre of mass over; the
         # lifted foot's share of the weight goes to the others on the way.
         planner.solve(feet_w, com0, None, iterations=10)
