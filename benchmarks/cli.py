@@ -1,4 +1,8 @@
-"""The ``bench`` commands; each writes a JSON file of results."""
+"""The ``bench`` commands; each writes a JSON file of results.
+
+``quaddance bench NAME`` runs them from a source checkout (`quaddance.cli.bench` loads this
+app); each body runs its benchmark from this package and prints a summary.
+"""
 
 from __future__ import annotations
 

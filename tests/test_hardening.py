@@ -431,9 +431,11 @@ def test_out_of_range_options_are_usage_errors(args, option) -> None:
 
 
 def _commands(group, prefix: tuple[str, ...] = ()):
-    for name, command in group.commands.items():
+    ctx = group.make_context("quaddance", [], resilient_parsing=True)
+    for name in group.list_commands(ctx):  # `bench` loads its commands when listed
+        command = group.get_command(ctx, name)
         yield (*prefix, name)
-        if hasattr(command, "commands"):  # a group (typer bundles its own click)
+        if hasattr(command, "list_commands"):  # a group (typer bundles its own click)
             yield from _commands(command, (*prefix, name))
 
 
@@ -451,19 +453,15 @@ def test_every_command_has_working_help() -> None:
 def test_bench_outside_a_checkout_is_one_line_and_exit_2(args, tmp_path, monkeypatch, capsys):
     """A wheel install has no benchmarks/ beside its package: `quaddance bench ...` says so
     in one line, whatever follows it."""
-    import quaddance.cli as cli
-    from quaddance.cli.bench import MISSING, add_bench
+    import quaddance.cli.bench as bench
+    from quaddance.cli import main
 
-    wheel = typer.Typer()
-    wheel.command("dance")(lambda: None)
-    add_bench(wheel, root=tmp_path)  # no benchmarks/ there
-    monkeypatch.setattr(cli, "app", wheel)
+    monkeypatch.setattr(bench, "checkout_root", lambda: tmp_path)  # no benchmarks/ there
     monkeypatch.setattr(sys, "argv", ["quaddance", *args])
     with pytest.raises(SystemExit) as stop:
-        cli.main()
+        main()
     assert stop.value.code == 2
-    err = capsys.readouterr().err
-    assert err == f"quaddance: error: {MISSING}\n"
+    assert capsys.readouterr().err == f"quaddance: error: {bench.MISSING}\n"
 
 
 # --- dance.npz ----------------------------------------------------------------------------------

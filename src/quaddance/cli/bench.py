@@ -2,16 +2,20 @@
 
 The benchmarks are not part of the installed package: they live in the repository's top-level
 ``benchmarks/`` package, beside ``src/`` (an editable install's ``src/quaddance`` ->
-``../../benchmarks``). Without it (a wheel install) ``quaddance bench`` is one line saying so
-and exit status 2.
+``../../benchmarks``), whose ``benchmarks.cli.app`` holds the commands. They are imported the
+first time a ``bench`` command is listed or looked up, so no other command loads them and
+``benchmarks.cli`` may import ``quaddance.cli``. Without them (a wheel install) every
+``quaddance bench ...`` is one line saying so and exit status 2.
 """
 
 from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import Any
 
 import typer
+from typer.core import TyperGroup
 
 from quaddance.errors import QuaddanceError
 
@@ -23,24 +27,42 @@ def checkout_root() -> Path:
     return Path(__file__).resolve().parents[3]  # src/quaddance/cli/bench.py
 
 
-def add_bench(app: typer.Typer, root: Path | None = None) -> None:
-    """Add the ``bench`` group to ``app``: the app of ``ROOT/benchmarks/cli.py`` (``root``
-    defaults to `checkout_root`), or, where there is none, a ``bench`` command that raises
-    `QuaddanceError` (`MISSING`) whatever its arguments."""
-    root = checkout_root() if root is None else root
-    if (root / "benchmarks" / "cli.py").is_file():
-        if str(root) not in sys.path:
-            sys.path.insert(0, str(root))
-        from benchmarks.cli import app as bench_app
+def benchmark_commands() -> dict[str, Any]:
+    """The commands of the checkout's ``benchmarks.cli.app`` (click commands by name).
 
-        app.add_typer(bench_app, name="bench")
-        return
-
-    @app.command(
-        "bench",
-        add_help_option=False,
-        context_settings={"allow_extra_args": True, "ignore_unknown_options": True},
-        help="Benchmarks (needs a source checkout of quaddance).",
-    )
-    def bench_missing() -> None:
+    Raises:
+        QuaddanceError: `MISSING`, where `checkout_root` has no ``benchmarks/cli.py``.
+    """
+    root = checkout_root()
+    if not (root / "benchmarks" / "cli.py").is_file():
         raise QuaddanceError(MISSING)
+    if str(root) not in sys.path:
+        sys.path.insert(0, str(root))
+    from benchmarks.cli import app
+
+    return dict(typer.main.get_group(app).commands)
+
+
+class BenchGroup(TyperGroup):
+    """The ``bench`` group: `benchmark_commands`, loaded when first listed or looked up."""
+
+    def _loaded(self) -> dict[str, Any]:
+        if not self.commands:
+            self.commands.update(benchmark_commands())
+        return dict(self.commands)
+
+    def list_commands(self, ctx: Any) -> list[str]:
+        return list(self._loaded())
+
+    def get_command(self, ctx: Any, cmd_name: str) -> Any:
+        return self._loaded().get(cmd_name)
+
+
+def add_bench(app: typer.Typer) -> None:
+    """Add the ``bench`` group to ``app``."""
+    app.add_typer(
+        typer.Typer(no_args_is_help=True),
+        name="bench",
+        cls=BenchGroup,
+        help="Benchmarks; each writes a JSON file of results (needs a source checkout).",
+    )
