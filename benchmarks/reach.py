@@ -36,7 +36,7 @@ import mujoco
 import numpy as np
 
 from quaddance.errors import QuaddanceError
-from quaddance.sim import go1
+from quaddance.robots import GO1
 from quaddance.sim.scene import SceneCfg, build_model
 
 LIFTABLE_FEET: tuple[str, ...] = ("FL", "FR")
@@ -194,7 +194,7 @@ class _Planner:
                 np.array([model.joint(f"{leg}_{p}_joint").dofadr[0] for p in _PARTS]),
                 model.site(leg).id,
             )
-            for leg in go1.MODEL_LEGS
+            for leg in GO1.legs
         }
         self.joint_lo = model.jnt_range[1:, 0].copy()  # model joint order (after the base)
         self.joint_hi = model.jnt_range[1:, 1].copy()
@@ -349,11 +349,11 @@ class _ReachRig:
         self.foot, self.cfg = foot, cfg
         self.model = build_model(scene, visual=False)
         self.kp = self.model.actuator_gainprm[:, 0].copy()
-        self.stance_legs = tuple(leg for leg in go1.FEET if leg != foot)
+        self.stance_legs = tuple(leg for leg in GO1.feet if leg != foot)
         # Only the stance legs are stiffened: the light lifted leg, fed its gravity torque,
         # holds still without it, and buzzes with it (extra gain applied at the control rate).
-        self.stiffened = np.array([leg != foot for leg in go1.MODEL_LEGS for _ in _PARTS])
-        self.site = {leg: self.model.site(leg).id for leg in go1.FEET}
+        self.stiffened = np.array([leg != foot for leg in GO1.legs for _ in _PARTS])
+        self.site = {leg: self.model.site(leg).id for leg in GO1.feet}
         model = self.model
         colliding = [g for g in range(model.ngeom) if model.geom_contype[g]]
         leg_bodies = {model.body(f"{foot}_{p}").id for p in ("thigh", "calf")}
@@ -374,7 +374,7 @@ class _ReachRig:
         mujoco.mj_step(self.model, data, nstep=self.steps_per_ctrl)
 
     def _foot_height(self, data: mujoco.MjData, leg: str) -> float:
-        return float(data.site_xpos[self.site[leg], 2]) - go1.FOOT_RADIUS_M
+        return float(data.site_xpos[self.site[leg], 2]) - GO1.foot_radius_m
 
     def _shift(self) -> tuple[np.ndarray, _Stance]:
         cfg, model = self.cfg, self.model
@@ -382,14 +382,14 @@ class _ReachRig:
         mujoco.mj_resetDataKeyframe(model, data, model.key("home").id)
         mujoco.mj_forward(model, data)
         planner = _Planner(model, data.qpos)
-        all_feet = dict.fromkeys(go1.FEET, 1.0)
+        all_feet = dict.fromkeys(GO1.feet, 1.0)
         q_home, tau_home = planner.joint_targets(), planner.holding_torques(all_feet)
         for _ in range(self._n_ctrl(cfg.settle_s)):
             self._step(data, q_home, tau_home)
         standing_qpos = data.qpos.copy()
 
         planner = _Planner(model, standing_qpos)
-        feet_w = {leg: data.site_xpos[self.site[leg]].copy() for leg in go1.FEET}
+        feet_w = {leg: data.site_xpos[self.site[leg]].copy() for leg in GO1.feet}
         # The lifted foot's path starts from where it stands relative to the trunk.
         swing_pref_b_xy = planner.to_trunk_xy(feet_w[self.foot])
         tri_xy = np.array([feet_w[leg][:2] for leg in self.stance_legs])
@@ -439,7 +439,7 @@ class _ReachRig:
         planner = _Planner(self.model, st.planner_qpos)
         worst = dict(st.worst)
         loads = dict.fromkeys(self.stance_legs, 1.0)
-        z_goal = target_m + go1.FOOT_RADIUS_M
+        z_goal = target_m + GO1.foot_radius_m
         n_lift, n_hold = self._n_ctrl(cfg.lift_s), self._n_ctrl(cfg.hold_s)
         n_window = min(n_hold, self._n_ctrl(cfg.measure_window_s))
         heights: list[float] = []
@@ -450,7 +450,7 @@ class _ReachRig:
                 z_offset += (
                     cfg.height_gain_per_s
                     * self.dt_ctrl_s
-                    * (z_plan - go1.FOOT_RADIUS_M - heights[-1])
+                    * (z_plan - GO1.foot_radius_m - heights[-1])
                 )
                 z_offset = min(max(z_offset, -cfg.max_height_offset_m), cfg.max_height_offset_m)
             z = z_plan + z_offset
@@ -519,8 +519,8 @@ def kinematic_reach(
 
     Returns ``{"height_m", "joint_pos_rad" (hip, thigh, calf), "foot_pos_w_m" (3,)}``.
     """
-    if foot not in go1.FEET:
-        raise QuaddanceError(f"foot must be one of {go1.FEET}, got {foot!r}")
+    if foot not in GO1.feet:
+        raise QuaddanceError(f"foot must be one of {GO1.feet}, got {foot!r}")
     model = build_model(scene, visual=False)
     data = mujoco.MjData(model)
     mujoco.mj_resetDataKeyframe(model, data, model.key("home").id)
@@ -541,7 +541,7 @@ def kinematic_reach(
             forward_w = data.xmat[1].reshape(3, 3)[:, 0]
             if np.dot(foot_w - data.xpos[hip], forward_w) < 0.0:
                 return -np.inf
-        return float(foot_w[2]) - go1.FOOT_RADIUS_M
+        return float(foot_w[2]) - GO1.foot_radius_m
 
     best_q, best_h = (lo + hi) / 2, -np.inf
     centre, half = (lo + hi) / 2, (hi - lo) / 2

@@ -18,6 +18,7 @@ from quaddance.errors import InputFileError, QuaddanceError
 from quaddance.music.synth import render_song
 from quaddance.play.dance import DanceJob, run_dance
 from quaddance.play.policy import OnnxPolicy, shipped_policy_path
+from quaddance.robots import GO1
 
 
 @pytest.fixture(scope="module")
@@ -191,7 +192,7 @@ def test_shipped_feedforward_table_is_the_one_the_task_computes():
 
     meta = json.loads(shipped_policy_path().with_suffix(".json").read_text())
     shipped = np.asarray(meta["front_feedforward"]["thigh_calf_offsets_rad"])
-    np.testing.assert_allclose(shipped, lift_table(), atol=1e-6)
+    np.testing.assert_allclose(shipped, lift_table(GO1), atol=1e-6)
 
 
 def test_policy_json_without_its_feedforward_table_is_refused(tmp_path):

@@ -26,12 +26,11 @@ from quaddance.deploy.controller import DanceController
 from quaddance.deploy.log import write_outputs
 from quaddance.deploy.robot import JointCommand, Reading
 from quaddance.deploy.runner import DeployOptions, Runner
-from quaddance.deploy.safety import effort_limits_nm
 from quaddance.deploy.states import DeployState
 from quaddance.errors import QuaddanceError
 from quaddance.play.dance import target_config_for
 from quaddance.play.policy import OnnxPolicy, shipped_policy_path
-from quaddance.sim import go1
+from quaddance.robots import GO1
 
 DEPLOY_KEYS = {
     "robot",
@@ -129,7 +128,7 @@ def test_runner_builds_the_training_observation_and_targets(policy):
         prop, obs_run = ctrl.observe(reading_from_env(env, k), k)
         assert obs_run.shape == obs_env.shape == (1, policy.obs_dim)
         assert torch.allclose(obs_run, obs_env, atol=1e-6, rtol=0), f"step {k}"
-        action = torch.randn(1, go1.NUM_JOINTS, generator=gen)
+        action = torch.randn(1, GO1.num_joints, generator=gen)
         ctrl.commit(prop, action)
         assert torch.allclose(ctrl.joint_targets(action), env.joint_targets(action), atol=1e-6)
         obs_env = env.step(action)[0]["actor"]
@@ -146,11 +145,11 @@ def test_go1_lowcmd_and_lowstate_mapping(policy):
     from quaddance.deploy import go1_backend as gb
 
     rng = np.random.default_rng(1)
-    cmd = JointCommand(*(rng.uniform(-1, 1, (5, go1.NUM_JOINTS))))
+    cmd = JointCommand(*(rng.uniform(-1, 1, (5, GO1.num_joints))))
     low = sdk.LowCmd()
-    gb.fill_low_cmd(low, cmd)
+    gb.fill_low_cmd(low, cmd, GO1)
     assert low.levelFlag == gb.LOWLEVEL
-    for j in range(go1.NUM_JOINTS):
+    for j in range(GO1.num_joints):
         m = low.motorCmd[j]  # SDK motor j is model joint j (FR_0, FR_1, FR_2, FL_0, ...)
         assert m.mode == gb.SERVO_MODE
         np.testing.assert_allclose(
@@ -159,9 +158,9 @@ def test_go1_lowcmd_and_lowstate_mapping(policy):
             atol=1e-6,
         )
     # PositionLimit (the SDK's guard) leaves an in-range command alone.
-    q_nom = np.asarray(go1.nominal_joint_pos())
-    z = np.zeros(go1.NUM_JOINTS)
-    gb.fill_low_cmd(low, JointCommand(q_nom, z, z + 20, z + 0.5, z))
+    q_nom = np.asarray(GO1.nominal_joint_pos_rad)
+    z = np.zeros(GO1.num_joints)
+    gb.fill_low_cmd(low, JointCommand(q_nom, z, z + 20, z + 0.5, z), GO1)
     sdk.Safety(sdk.LeggedType.Go1).PositionLimit(low)
     np.testing.assert_allclose([low.motorCmd[j].q for j in range(12)], q_nom, atol=1e-6)
 
@@ -170,13 +169,13 @@ def test_go1_lowcmd_and_lowstate_mapping(policy):
     dq = rng.uniform(-1, 1, 12)
     quat = np.array([0.99, 0.05, -0.08, 0.02])
     quat /= np.linalg.norm(quat)
-    for j in range(go1.NUM_JOINTS):
+    for j in range(GO1.num_joints):
         state.motorState[j].q, state.motorState[j].dq = float(q[j]), float(dq[j])
     state.imu.quaternion = quat.tolist()
     state.imu.gyroscope = [0.1, -0.2, 0.3]
     state.footForce = [10, 20, 30, 40]  # FR, FL, RR, RL
     state.tick = 1234
-    reading = gb.reading_from_low_state(state)
+    reading = gb.reading_from_low_state(state, GO1)
     assert reading.seq == 1234
     np.testing.assert_allclose(reading.foot_force_n, [20, 10, 40, 30])  # FL, FR, RL, RR
     direct = Reading(
@@ -283,7 +282,7 @@ def test_sim_deploy_of_a_song_dances_through_lag_with_a_soft_start_in_torque_lim
     # stayed in the motor limits, and it took >= 2 s.
     standing = log["state"] == DeployState.STAND.code
     assert np.isfinite(log["tau_est_nm"][standing]).all()
-    assert (np.abs(log["tau_est_nm"][standing]) <= effort_limits_nm()).all()
+    assert (np.abs(log["tau_est_nm"][standing]) <= np.asarray(GO1.effort_limit_nm)).all()
     stand_s = log["wall_s"][standing][-1] - log["wall_s"][standing][0]
     assert stand_s >= 2.0 - 0.03
 

@@ -10,12 +10,12 @@ import pytest
 
 from quaddance.deploy.robot import Reading, Robot
 from quaddance.deploy.runner import DeployOptions, Runner
-from quaddance.deploy.safety import Safety, SafetyCfg, effort_limits_nm, go1_joint_range_rad
+from quaddance.deploy.safety import Safety, SafetyCfg, joint_range_rad
 from quaddance.deploy.states import DeployState
 from quaddance.play.policy import OnnxPolicy, shipped_policy_path
-from quaddance.sim import go1
+from quaddance.robots import GO1
 
-NOMINAL = np.asarray(go1.nominal_joint_pos())
+NOMINAL = np.asarray(GO1.nominal_joint_pos_rad)
 
 
 def reading(seq: int, q=NOMINAL, dq=None, quat=(1.0, 0.0, 0.0, 0.0)) -> Reading:
@@ -32,10 +32,11 @@ def reading(seq: int, q=NOMINAL, dq=None, quat=(1.0, 0.0, 0.0, 0.0)) -> Reading:
 def safety(**cfg) -> Safety:
     return Safety(
         SafetyCfg(**cfg),
+        robot=GO1,
         kp=20.0,
         kd=0.5,
         nominal_rad=NOMINAL,
-        joint_range_rad=go1_joint_range_rad(),
+        joint_range_rad=joint_range_rad(GO1),
     )
 
 
@@ -44,20 +45,20 @@ def test_guard_keeps_targets_in_range_step_and_torque_limits():
     r = reading(1, dq=np.full(12, 3.0))
     # Far targets: the torque the boards would start from must land on the motor limits.
     cmd, tau_est = sf.guard(NOMINAL + 2.0, 20.0, r)
-    limits = effort_limits_nm()
+    limits = np.asarray(GO1.effort_limit_nm)
     assert (np.abs(tau_est) > limits).any()
     tau = cmd.kp * (cmd.q_rad - r.joint_pos_rad) - cmd.kd * r.joint_vel_rad_s
     assert (np.abs(tau) <= limits + 1e-9).all() and sf.counts.torque == 1
-    lo, hi = go1_joint_range_rad().T
+    lo, hi = joint_range_rad(GO1).T
     assert (cmd.q_rad >= lo).all() and (cmd.q_rad <= hi).all()
     # The next target may move at most max_target_step_rad from the one sent.
     first = cmd.q_rad.copy()
     cmd2, _ = sf.guard(NOMINAL - 1.0, 20.0, reading(2, q=first))
-    assert np.abs(cmd2.q_rad - first).max() <= sf.cfg.max_target_step_rad + 1e-12
+    assert np.abs(cmd2.q_rad - first).max() <= sf.limits.max_target_step_rad + 1e-12
     assert sf.counts.target_step == 1
     # Beyond the joint range: clamped inside it by the margin.
     cmd3, _ = safety().guard(np.full(12, -5.0), 0.0, reading(3))
-    np.testing.assert_allclose(cmd3.q_rad, lo + SafetyCfg().soft_limit_margin_rad)
+    np.testing.assert_allclose(cmd3.q_rad, lo + GO1.safety_limits.soft_limit_margin_rad)
 
 
 def test_stale_nan_and_tilt_checks():

@@ -23,7 +23,7 @@ from quaddance.play.evaluate import EvalSettings, evaluate, evaluate_items, summ
 from quaddance.play.metrics import dance_metrics
 from quaddance.play.policy import OnnxPolicy, shipped_policy_path
 from quaddance.play.rollout import PinnedDynamics, playback_env, rollout
-from quaddance.sim import go1
+from quaddance.robots import GO1
 
 METRICS_JSON_KEYS = DANCE_METRIC_KEYS | {
     "source",
@@ -199,7 +199,7 @@ def test_zero_output_is_the_feedforward_alone(policy, monkeypatch):
     before = ff_only.time_s < 0.95  # the feed-forward of a zero target is zero
     np.testing.assert_allclose(ff_only.qpos[before], nothing.qpos[before], atol=1e-9)
     # During the lift the feed-forward bends the front-left leg's thigh and calf.
-    fl = [7 + go1.JOINT_NAMES.index(f"FL_{part}_joint") for part in ("thigh", "calf")]
+    fl = [7 + GO1.joint_names.index(f"FL_{part}_joint") for part in ("thigh", "calf")]
     assert np.abs(ff_only.qpos[:, fl] - nothing.qpos[:, fl]).max() > 0.1
     assert not np.allclose(ff_only.feet_m, with_policy.feet_m, atol=1e-3)
     with pytest.raises(QuaddanceError, match="policy output"):

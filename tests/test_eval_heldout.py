@@ -20,7 +20,7 @@ from quaddance.cli import app
 from quaddance.music.synth import render_song
 from quaddance.play.heldout import OTHER_ITEMS, render_feet, write_held_out_set
 from quaddance.play.rollout import PinnedDynamics
-from quaddance.sim import go1
+from quaddance.robots import GO1
 
 DURATION_S = 12.0
 
@@ -203,7 +203,7 @@ def test_without_feedforward_the_joint_targets_are_the_policy_alone():
         meta = policy_metadata(env, TrainCfg(task=cfg))
         assert (meta["front_feedforward"] is None) is (not on)
         assert meta["task"]["front_feedforward"] is on
-    nominal = torch.tensor(go1.nominal_joint_pos())
+    nominal = torch.tensor(GO1.nominal_joint_pos_rad)
     torch.testing.assert_close(targets[False], nominal)
     assert (targets[True] - nominal).abs().max() > 0.1
 

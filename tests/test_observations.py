@@ -8,7 +8,7 @@ import mujoco
 import numpy as np
 import torch
 
-from quaddance.sim import go1
+from quaddance.robots import GO1
 from quaddance.sim.config import DanceTaskCfg
 from quaddance.sim.kinematics import estimate_foot_height_m, foot_pos_b, leg_geometry
 from quaddance.sim.observations import (
@@ -32,7 +32,7 @@ def test_leg_kinematics_match_mujoco_for_any_pose():
     model = build_model(SceneCfg())
     data = mujoco.MjData(model)
     rng = np.random.default_rng(0)
-    geom = leg_geometry()
+    geom = leg_geometry(GO1)
     for _ in range(20):
         data.qpos[:] = model.key("home").qpos
         data.qpos[7:] += rng.uniform(-0.6, 0.6, 12)
@@ -41,7 +41,7 @@ def test_leg_kinematics_match_mujoco_for_any_pose():
         mujoco.mj_kinematics(model, data)
         rot = data.xmat[1].reshape(3, 3)
         truth = np.stack(
-            [rot.T @ (data.site_xpos[model.site(f).id] - data.xpos[1]) for f in go1.FEET]
+            [rot.T @ (data.site_xpos[model.site(f).id] - data.xpos[1]) for f in GO1.feet]
         )
         ours = foot_pos_b(torch.tensor(data.qpos[None, 7:]), geom)[0].numpy()
         np.testing.assert_allclose(ours, truth, atol=1e-9)
@@ -57,12 +57,14 @@ def test_foot_height_estimate_is_exact_relative_to_the_lowest_foot_at_any_tilt()
         roll, pitch, yaw = rng.uniform(-0.3, 0.3, 3)
         mujoco.mju_euler2Quat(data.qpos[3:7], [roll, pitch, yaw], "xyz")
         mujoco.mj_kinematics(model, data)
-        z = np.array([data.site_xpos[model.site(f).id][2] for f in go1.FEET])
+        z = np.array([data.site_xpos[model.site(f).id][2] for f in GO1.feet])
         quat = torch.tensor(data.qpos[None, 3:7])
         meas = Measurement.from_imu(
             quat, torch.zeros(1, 3), torch.tensor(data.qpos[None, 7:]), torch.zeros(1, 12)
         )
-        est = estimate_foot_height_m(meas.joint_pos_rad, meas.projected_gravity_b, leg_geometry())
+        est = estimate_foot_height_m(
+            meas.joint_pos_rad, meas.projected_gravity_b, leg_geometry(GO1)
+        )
         np.testing.assert_allclose(est[0].numpy(), z - z.min(), atol=1e-9)
 
 
@@ -83,7 +85,7 @@ def test_foot_height_estimate_tracks_the_truth_while_the_policy_dances():
     for step in range(140):
         obs = env.step(torch.from_numpy(policy.act(obs.numpy())))[0]["actor"]
         s = env.robot
-        est = estimate_foot_height_m(s.joint_pos, s.projected_gravity_b, leg_geometry())
+        est = estimate_foot_height_m(s.joint_pos, s.projected_gravity_b, leg_geometry(GO1))
         err.append((est - s.foot_height_m).abs().max().item())
         lifted = max(lifted, s.foot_height_m[0, 0].item())
         if landed is None and (s.foot_height_m < 0.005).all():

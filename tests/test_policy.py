@@ -15,7 +15,7 @@ from quaddance.dancefile import Dance
 from quaddance.errors import InputFileError, QuaddanceError
 from quaddance.play.policy import OnnxPolicy
 from quaddance.play.rollout import rollout
-from quaddance.sim import go1
+from quaddance.robots import GO1
 from quaddance.train import TrainCfg, Trainer
 
 FPS = 50.0
@@ -94,7 +94,7 @@ def test_load_an_exported_policy(standing_policy):
     meta = json.loads(standing_policy.with_suffix(".json").read_text())
     assert policy.obs_dim == meta["obs"]["dim"]
     actions = policy.act(np.random.default_rng(0).normal(size=(3, policy.obs_dim)))
-    assert actions.shape == (3, go1.NUM_JOINTS) and actions.dtype == np.float32
+    assert actions.shape == (3, GO1.num_joints) and actions.dtype == np.float32
     np.testing.assert_array_equal(actions, 0.0)
     # The task settings come back from the JSON as the same dataclasses (tuples included).
     assert policy.task.obs.preview_s == (0.1, 0.2, 0.4)
@@ -167,7 +167,7 @@ def test_rollout_shapes_time_axis_and_targets(standing_policy):
     result = rollout(dance, OnnxPolicy.load(standing_policy), progress=lambda i, n: calls.append(i))
     n = dance.targets_m.shape[0]
     assert result.fps == FPS
-    assert result.time_s.shape == (n,) and result.qpos.shape == (n, 7 + go1.NUM_JOINTS)
+    assert result.time_s.shape == (n,) and result.qpos.shape == (n, 7 + GO1.num_joints)
     assert result.feet_m.shape == (n, 4) and result.targets_m.shape == (n, 4)
     np.testing.assert_allclose(result.time_s, dance.time_s)
     np.testing.assert_allclose(result.targets_m, dance.targets_m, atol=1e-7)
@@ -184,7 +184,7 @@ def test_rollout_of_a_standing_policy_does_not_fall(standing_policy):
     assert np.abs(result.feet_m[settled]).max() < 0.01
     assert np.all((result.qpos[settled, 2] > 0.25) & (result.qpos[settled, 2] < 0.30))
     # The recorded qpos is the robot's: it starts in the home pose.
-    np.testing.assert_allclose(result.qpos[0, 7:], go1.nominal_joint_pos(), atol=1e-6)
+    np.testing.assert_allclose(result.qpos[0, 7:], GO1.nominal_joint_pos_rad, atol=1e-6)
 
 
 def test_rollout_refuses_a_dance_at_another_rate(standing_policy):
@@ -215,4 +215,4 @@ def test_rollout_goes_on_after_falls(collapsing_policy):
     np.testing.assert_allclose(result.targets_m, dance.targets_m, atol=1e-7)
     after_fall = np.round(falls * FPS).astype(int)
     after_fall = after_fall[after_fall < len(dance.time_s)]
-    np.testing.assert_allclose(result.qpos[after_fall, 2], go1.INIT_BASE_HEIGHT_M, atol=1e-6)
+    np.testing.assert_allclose(result.qpos[after_fall, 2], GO1.init_base_height_m, atol=1e-6)

@@ -12,7 +12,8 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
-from quaddance.sim import go1, rewards, terminations
+from quaddance.robots import GO1
+from quaddance.sim import rewards, terminations
 from quaddance.sim.config import DanceTaskCfg, RewardCfg
 from quaddance.sim.engines import CpuEngine, apply_dynamics
 from quaddance.sim.kinematics import estimate_foot_height_m, leg_geometry
@@ -41,7 +42,7 @@ def noisy_home(model: mujoco.MjModel, n: int, seed: int) -> tuple[torch.Tensor, 
     """(n, nq) home poses with joint noise and (n, nv) small random velocities."""
     gen = torch.Generator().manual_seed(seed)
     qpos = torch.tensor(model.key("home").qpos, dtype=torch.float32).repeat(n, 1)
-    qpos[:, 7:] += (torch.rand(n, go1.NUM_JOINTS, generator=gen) * 2 - 1) * 0.1
+    qpos[:, 7:] += (torch.rand(n, GO1.num_joints, generator=gen) * 2 - 1) * 0.1
     qvel = (torch.rand(n, model.nv, generator=gen) * 2 - 1) * 0.2
     return qpos, qvel
 
@@ -49,8 +50,8 @@ def noisy_home(model: mujoco.MjModel, n: int, seed: int) -> tuple[torch.Tensor, 
 def random_controls(n: int, steps: int, seed: int) -> torch.Tensor:
     """(steps, n, 4, 12) joint targets around the nominal pose, rad."""
     gen = torch.Generator().manual_seed(seed)
-    nominal = torch.tensor(go1.nominal_joint_pos())
-    noise = (torch.rand(steps, n, 4, go1.NUM_JOINTS, generator=gen) * 2 - 1) * 0.3
+    nominal = torch.tensor(GO1.nominal_joint_pos_rad)
+    noise = (torch.rand(steps, n, 4, GO1.num_joints, generator=gen) * 2 - 1) * 0.3
     return nominal + noise
 
 
@@ -64,14 +65,14 @@ def model() -> mujoco.MjModel:
 
 def test_model_joints_and_actuators_follow_go1_order(model):
     assert (model.nq, model.nv, model.nu) == (7 + 12, 6 + 12, 12)
-    for i, name in enumerate(go1.JOINT_NAMES):
+    for i, name in enumerate(GO1.joint_names):
         joint = model.joint(name)
         # qpos[7 + i] is joint i, and actuator i drives it: the action layout relies on both.
         assert joint.qposadr[0] == 7 + i
         assert model.actuator_trnid[i, 0] == joint.id
-    np.testing.assert_allclose(model.key("home").qpos[7:], go1.nominal_joint_pos())
+    np.testing.assert_allclose(model.key("home").qpos[7:], GO1.nominal_joint_pos_rad)
     np.testing.assert_allclose(
-        model.key("home").qpos[:7], [0, 0, go1.INIT_BASE_HEIGHT_M, 1, 0, 0, 0]
+        model.key("home").qpos[:7], [0, 0, GO1.init_base_height_m, 1, 0, 0, 0]
     )
     # Position actuators with the released code's gains: force = kp (ctrl - q) - kd qdot.
     np.testing.assert_allclose(model.actuator_gainprm[:, 0], 20.0)
@@ -79,7 +80,7 @@ def test_model_joints_and_actuators_follow_go1_order(model):
 
 
 def test_sensor_layout_addresses_are_distinct_and_in_range(model):
-    layout = SensorLayout.from_model(model)
+    layout = SensorLayout.from_model(model, GO1)
     addresses = [
         *layout.foot_pos,
         *layout.foot_vel,
@@ -98,12 +99,12 @@ def test_state_reads_feet_torques_and_velocities_of_the_named_bodies(model):
     d = mujoco.MjData(model)
     qpos, qvel = noisy_home(model, 1, seed=3)
     d.qpos[:], d.qvel[:] = qpos[0].numpy(), qvel[0].numpy()
-    d.ctrl[:] = np.asarray(go1.nominal_joint_pos()) + 0.2
+    d.ctrl[:] = np.asarray(GO1.nominal_joint_pos_rad) + 0.2
     mujoco.mj_forward(model, d)
-    layout = SensorLayout.from_model(model)
+    layout = SensorLayout.from_model(model, GO1)
     as_t = lambda a: torch.as_tensor(np.asarray(a)[None], dtype=torch.float64)  # noqa: E731
     s = state_from_arrays(as_t(d.qpos), as_t(d.qvel), as_t(d.sensordata), layout)
-    for k, foot in enumerate(go1.FEET):
+    for k, foot in enumerate(GO1.feet):
         np.testing.assert_allclose(s.foot_pos_w[0, k].numpy(), d.site(foot).xpos, atol=1e-9)
         vel = np.zeros(6)
         mujoco.mj_objectVelocity(model, d, mujoco.mjtObj.mjOBJ_SITE, model.site(foot).id, vel, 0)
@@ -199,7 +200,7 @@ def test_observation_layout_names_what_the_policy_sees():
     # Foot heights are the robot's own kinematic estimate, never the simulator's truth
     # (tests/test_observations.py compares the two).
     s = env.robot
-    estimate = estimate_foot_height_m(s.joint_pos, s.projected_gravity_b, leg_geometry())
+    estimate = estimate_foot_height_m(s.joint_pos, s.projected_gravity_b, leg_geometry(GO1))
     torch.testing.assert_close(a[:, actor["proprio.foot_height_m"]], estimate)
     torch.testing.assert_close(
         a[:, actor["proprio.projected_gravity"]], env.robot.projected_gravity_b
@@ -330,7 +331,7 @@ def test_upside_down_and_low_bases_fall():
     assert torch.all(reward[1:] <= RewardCfg().termination)
     # The fallen envs start again standing.
     assert env.episode_length_buf.tolist() == [1, 0, 0]
-    np.testing.assert_allclose(env.robot.base_pos_w[1:, 2].numpy(), go1.INIT_BASE_HEIGHT_M)
+    np.testing.assert_allclose(env.robot.base_pos_w[1:, 2].numpy(), GO1.init_base_height_m)
 
 
 def test_time_out_is_reported_and_is_not_a_fall():
@@ -352,7 +353,7 @@ def test_dynamics_variants_change_the_per_env_models():
     rows = np.array([[1.0, 0.0, 1.0], [0.4, 2.5, 1.1], [2.5, -1.0, 0.9]])
     engine = CpuEngine(3, variants=rows)
     base = engine.model
-    feet = [base.geom(f"{f}_foot_collision").id for f in go1.FEET]
+    feet = [base.geom(f"{f}_foot_collision").id for f in GO1.feet]
     trunk = base.body("trunk").id
     for row, m in zip(rows, engine._variant_models, strict=True):
         np.testing.assert_allclose(m.geom_friction[feet, 0], row[0])
@@ -374,7 +375,7 @@ def test_dynamics_variants_are_what_each_env_simulates():
     rows = np.array([[1.0, 0.0, 1.0], [1.0, 3.0, 1.0], [1.0, 0.0, 0.9]])
     engine = CpuEngine(3, variants=rows)
     engine.set_variants(np.arange(3), np.arange(3))
-    ctrl = torch.tensor(go1.nominal_joint_pos()).repeat(3, 4, 1)
+    ctrl = torch.tensor(GO1.nominal_joint_pos_rad).repeat(3, 4, 1)
     for _ in range(50):
         out = engine.step(ctrl)
     height = out.qpos[:, 2]
@@ -385,7 +386,7 @@ def test_dynamics_variants_are_what_each_env_simulates():
 def test_scene_foot_friction_reaches_the_simulated_model():
     engine = CpuEngine(1, SceneCfg(foot_friction=0.5))
     m = engine._models[0]
-    feet = [m.geom(f"{f}_foot_collision").id for f in go1.FEET]
+    feet = [m.geom(f"{f}_foot_collision").id for f in GO1.feet]
     np.testing.assert_allclose(m.geom_friction[feet, 0], 0.5)
 
 
@@ -547,9 +548,9 @@ def test_dance_env_reward_terms_agree_on_both_engines(warp_engine_cls):
 
 
 def test_lift_table_raises_the_front_foot_by_the_requested_height(model):
-    from quaddance.sim.feedforward import LUT_HEIGHTS_M, lift_table
+    from quaddance.sim.feedforward import lift_table
 
-    table = lift_table()
+    table = lift_table(GO1)
     data = mujoco.MjData(model)
     site = model.site("FL").id
     ti = model.joint("FL_thigh_joint").qposadr[0]
@@ -557,7 +558,7 @@ def test_lift_table_raises_the_front_foot_by_the_requested_height(model):
     data.qpos[:] = model.key("home").qpos
     mujoco.mj_kinematics(model, data)
     z0 = data.site_xpos[site][2]
-    for h, (d_thigh, d_calf) in zip(LUT_HEIGHTS_M, table, strict=True):
+    for h, (d_thigh, d_calf) in zip(GO1.front_lift.heights_m, table, strict=True):
         if h > 0.3:
             break
         data.qpos[:] = model.key("home").qpos
@@ -576,7 +577,7 @@ def test_feedforward_moves_only_the_lifted_front_leg():
     env = DanceEnv(cfg, bank, seed=0, random_start=False)
     env.bank_idx[:] = 0
     offset = env.joint_targets(torch.zeros(2, 12)) - env.nominal_joint_pos
-    fl = 3 * go1.MODEL_LEGS.index("FL")
+    fl = 3 * GO1.legs.index("FL")
     moved = offset.abs().sum(0) > 1e-6
     assert moved[fl + 1] and moved[fl + 2]  # FL thigh and calf
     assert int(moved.sum()) == 2

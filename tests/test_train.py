@@ -19,7 +19,7 @@ from typer.testing import CliRunner
 
 from quaddance.cli import app, main
 from quaddance.errors import InputFileError
-from quaddance.sim import go1
+from quaddance.robots import GO1
 from quaddance.train import TrainCfg, Trainer, build_bank
 
 NUM_ENVS = 8
@@ -124,7 +124,7 @@ def test_onnx_export_equals_the_deterministic_torch_policy(trained):
     finally:
         policy.train()
     (got,) = session.run(None, {session.get_inputs()[0].name: obs.numpy()})
-    assert got.shape == (16, go1.NUM_JOINTS)
+    assert got.shape == (16, GO1.num_joints)
     np.testing.assert_allclose(got, expected.numpy(), atol=1e-5, rtol=1e-5)
 
 
@@ -145,10 +145,10 @@ def test_policy_json_describes_the_policy(trained):
     }
     session = ort.InferenceSession(str(trained.onnx_path), providers=["CPUExecutionProvider"])
     assert session.get_inputs()[0].shape[-1] == dim
-    assert meta["joint_names"] == list(go1.JOINT_NAMES)
+    assert meta["joint_names"] == list(GO1.joint_names)
     assert meta["feet"] == ["FL", "FR", "RL", "RR"]
     np.testing.assert_allclose(meta["action_scale"], [0.125, 0.25, 0.25] * 4)
-    assert meta["nominal_joint_pos_rad"] == pytest.approx(go1.nominal_joint_pos())
+    assert meta["nominal_joint_pos_rad"] == pytest.approx(list(GO1.nominal_joint_pos_rad))
     assert (meta["policy_hz"], meta["decimation"], meta["sim_dt_s"]) == (50.0, 4, 0.005)
     assert meta["training"]["iterations"] == 2
     assert meta["training"]["num_envs"] == NUM_ENVS

@@ -9,18 +9,18 @@ import numpy as np
 import pytest
 import torch
 
-from quaddance.sim import go1, rewards
+from quaddance.robots import GO1
+from quaddance.sim import rewards
 from quaddance.sim.body import BodyFeedforward, leg_ik, rpy_matrix
 from quaddance.sim.config import DanceTaskCfg
 from quaddance.sim.kinematics import foot_pos_b, leg_geometry
 from quaddance.sim.observations import ActorObservation, actor_terms
-from quaddance.sim.scene import SceneCfg
 
 
 def test_leg_ik_inverts_forward_kinematics():
-    geom = leg_geometry()
+    geom = leg_geometry(GO1)
     gen = torch.Generator().manual_seed(0)
-    q = torch.tensor(go1.nominal_joint_pos())[None] + 0.3 * (
+    q = torch.tensor(GO1.nominal_joint_pos_rad)[None] + 0.3 * (
         torch.rand(500, 12, generator=gen) * 2 - 1
     )
     feet = foot_pos_b(q, geom)
@@ -28,15 +28,15 @@ def test_leg_ik_inverts_forward_kinematics():
 
 
 def test_body_feedforward_keeps_the_feet_where_they_stand():
-    ff = BodyFeedforward(SceneCfg())
-    geom = leg_geometry()
+    ff = BodyFeedforward(GO1)
+    geom = leg_geometry(GO1)
     body = torch.tensor(
         [[0.0, 0.0, 0.0, 0.0], [-0.05, 0.0, 0.0, 0.0], [0.02, 0.2, -0.1, 0.15], [0, 0, 0.2, -0.2]]
     )
     offsets = ff(body)
     assert offsets[0].abs().max() < 1e-6  # the standing pose needs no offset
     assert offsets[1:].abs().amax(dim=1).min() > 0.05  # every other pose moves joints
-    q = torch.tensor(go1.nominal_joint_pos())[None] + offsets
+    q = torch.tensor(GO1.nominal_joint_pos_rad)[None] + offsets
     # Feet in the world: trunk rotated by the target's rpy and raised by its height offset.
     feet_w = torch.einsum("nij,nkj->nki", rpy_matrix(body[:, 1:]), foot_pos_b(q, geom))
     feet_w[..., 2] += body[:, :1]
@@ -88,7 +88,7 @@ def test_heading_error_is_imu_yaw_since_the_start_minus_the_target_wrapped():
     meas = Measurement.from_imu(
         quat,
         torch.zeros(2, 3),
-        torch.tensor([go1.nominal_joint_pos()] * 2),
+        torch.tensor([GO1.nominal_joint_pos_rad] * 2),
         torch.zeros(2, 12),
         heading_zero_rad=-3.0,
     )
@@ -112,7 +112,7 @@ def test_the_robot_runner_measures_heading_from_the_dance_start():
             stamp_s=0.0,
             quat_wxyz=np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)]),
             gyro_rad_s=np.zeros(3),
-            joint_pos_rad=np.array(go1.nominal_joint_pos()),
+            joint_pos_rad=np.array(GO1.nominal_joint_pos_rad),
             joint_vel_rad_s=np.zeros(12),
         )
 

@@ -23,6 +23,7 @@ import numpy as np
 
 from quaddance.choreo.choreographer import MIN_JERK_PEAK_SPEED, LiftPlan, min_jerk, render_lifts
 from quaddance.errors import QuaddanceError
+from quaddance.robots import GO1, BodyLimits
 
 TargetMode = Literal["feasible", "paper", "minmax"]
 MODES: tuple[str, ...] = ("feasible", "paper", "minmax")
@@ -40,11 +41,10 @@ class TargetConfig:
     h0_m: float = 2.0
     #: The released code's scale s on min-max normalised heights (0.2 ... 2.5 were tried).
     scale: float = 1.0
-    #: Highest front-foot target while standing on three legs: 80 % of the 0.38 m that the
-    #: Go1 held in our simulator (`quaddance bench reach`, quasi-static, trunk at 0.32 m);
-    #: the margin is for balancing dynamically on the beat. A policy declares the range it
-    #: was trained on in its JSON, and `quaddance dance` uses that instead.
-    max_height_m: float = 0.30
+    #: Highest front-foot target while standing on three legs: the robot's
+    #: (`RobotCfg.max_paw_height_m`). A policy declares the range it was trained on in its
+    #: JSON, and `quaddance dance` uses that instead.
+    max_height_m: float = GO1.max_paw_height_m
     #: Fastest vertical foot speed asked for. Chosen below a trotting Go1's swing-foot speed
     #: (1-2 m/s) because the dancer also shifts its weight onto three legs for each lift:
     #: a 0.2 m lift then lasts about 0.75 s, a 0.1 m tap about 0.4 s.
@@ -352,55 +352,10 @@ BODY_FILE_MAX_HEIGHT_M = 0.2
 BODY_FILE_MAX_ANGLE_RAD = 1.0
 
 
-@dataclass(frozen=True)
-class BodyLimits:
-    """The trunk pose range a Go1 holds while dancing, relative to standing.
-
-    ``height_offset_m`` is (lowest, highest), m; the angles are symmetric maxima, rad.
-    ``max_speed`` and ``max_accel`` are per column of `BODY_COLUMNS` (m/s or rad/s, and
-    m/s^2 or rad/s^2).
-    """
-
-    height_offset_m: tuple[float, float]
-    roll_rad: float
-    pitch_rad: float
-    yaw_rad: float
-    max_speed: tuple[float, float, float, float] = (0.25, 1.5, 1.5, 1.5)
-    max_accel: tuple[float, float, float, float] = (3.0, 20.0, 20.0, 20.0)
-
-    def __post_init__(self) -> None:
-        lo, hi = self.height_offset_m
-        values = [lo, hi, self.roll_rad, self.pitch_rad, self.yaw_rad]
-        values += list(self.max_speed) + list(self.max_accel)
-        if not all(np.isfinite(v) for v in values) or len(self.max_speed) != 4:
-            raise QuaddanceError("BodyLimits: every value must be finite, four speeds/accels")
-        if not lo <= 0.0 <= hi:
-            raise QuaddanceError(f"BodyLimits.height_offset_m must hold 0, got {(lo, hi)}")
-        if min(values[2:]) < 0 or min(list(self.max_speed) + list(self.max_accel)) <= 0:
-            raise QuaddanceError("BodyLimits: angles must be >= 0, speeds and accels > 0")
-
-    @property
-    def low(self) -> np.ndarray:
-        """(4,) lowest value per column."""
-        return np.array([self.height_offset_m[0], -self.roll_rad, -self.pitch_rad, -self.yaw_rad])
-
-    @property
-    def high(self) -> np.ndarray:
-        """(4,) highest value per column."""
-        return np.array([self.height_offset_m[1], self.roll_rad, self.pitch_rad, self.yaw_rad])
-
-
-# PROVISIONAL: estimates, not measured. To be replaced by the ranges that
-# `quaddance bench body-reach` measures in the simulator (four feet down / one paw up).
-#: Trunk range with all four feet on the ground.
-BODY_LIMITS_FOUR_FEET = BodyLimits(
-    height_offset_m=(-0.06, 0.03), roll_rad=0.25, pitch_rad=0.20, yaw_rad=0.25
-)
-#: Trunk range while a front paw target is above `TargetConfig.min_lift_m` (three legs carry
-#: the robot, so it leans and twists less).
-BODY_LIMITS_PAW_UP = BodyLimits(
-    height_offset_m=(-0.04, 0.02), roll_rad=0.12, pitch_rad=0.12, yaw_rad=0.15
-)
+#: Trunk range with all four feet on the ground, and while a front paw target is above
+#: `TargetConfig.min_lift_m`: the default robot's (`RobotCfg.body_four_feet`, `body_paw_up`).
+BODY_LIMITS_FOUR_FEET = GO1.body_four_feet
+BODY_LIMITS_PAW_UP = GO1.body_paw_up
 #: Time over which the allowed range blends between the two sets, s (before a lift starts
 #: and after it ends), so the range edges never move faster than the trunk may.
 BODY_RANGE_BLEND_S = 0.3

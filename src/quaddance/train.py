@@ -26,9 +26,8 @@ import torch
 from quaddance import __version__
 from quaddance.errors import InputFileError, QuaddanceError
 from quaddance.fileio import atomic_path
-from quaddance.sim import go1
+from quaddance.play.policy_spec import task_dict
 from quaddance.sim.config import DanceTaskCfg, RewardCfg
-from quaddance.sim.feedforward import LUT_HEIGHTS_M
 
 
 @dataclass(frozen=True)
@@ -242,7 +241,7 @@ class Trainer:
         torch.manual_seed(cfg.seed)
         task = copy.deepcopy(cfg.task)
         task.num_envs = cfg.num_envs or self.preset.num_envs
-        task.rewards = RewardCfg.named(cfg.reward)
+        task = dataclasses.replace(task, rewards=RewardCfg.named(cfg.reward))
         self.task_cfg = task
         cfg.run_dir.mkdir(parents=True, exist_ok=True)
         self.bank = build_bank(cfg) if bank is None else bank
@@ -483,15 +482,16 @@ def export_onnx(policy, path: Path) -> None:
 def policy_metadata(env, cfg: TrainCfg, trainer: Trainer | None = None) -> dict:
     """The policy's contract with playback and a real robot."""
     task = env.cfg
+    robot = task.scene.robot
     ramp = cfg.curriculum_env_steps
     return {
         "format": "quaddance-policy/1",
         "version": __version__,
-        "robot": "unitree_go1",
-        "joint_names": list(go1.JOINT_NAMES),
-        "feet": list(go1.FEET),
+        "robot": robot.name,
+        "joint_names": list(robot.joint_names),
+        "feet": list(robot.feet),
         "foot_height": "height of the foot sphere's bottom above the floor, m",
-        "nominal_joint_pos_rad": go1.nominal_joint_pos(),
+        "nominal_joint_pos_rad": list(robot.nominal_joint_pos_rad),
         "action_scale": env.action_scale.cpu().tolist(),
         "joint_target": (
             "nominal_joint_pos_rad + action_scale * action"
@@ -500,9 +500,9 @@ def policy_metadata(env, cfg: TrainCfg, trainer: Trainer | None = None) -> dict:
         "front_feedforward": None
         if env.feedforward is None
         else {
-            "heights_m": LUT_HEIGHTS_M.tolist(),
+            "heights_m": robot.front_lift.heights_m.tolist(),
             "thigh_calf_offsets_rad": env.feedforward.table.cpu().tolist(),
-            "applies_to": ["FL", "FR"],
+            "applies_to": list(robot.feet[:2]),
             "interpolation": "linear in height, clamped to the table",
         },
         "kp": task.scene.kp,
@@ -517,7 +517,7 @@ def policy_metadata(env, cfg: TrainCfg, trainer: Trainer | None = None) -> dict:
             "history_len": task.obs.history_len,
             "normalization": "inside the ONNX model (running mean/std)",
         },
-        "task": dataclasses.asdict(task),  # the task as trained (reward set, envs, ...)
+        "task": task_dict(task),  # the task as trained (reward set, envs, ...)
         # The range of front targets the policy trained on (read off its bank): playback
         # makes targets in the same range.
         "targets": {"max_height_m": round(float(env.bank[..., :2].max()), 4)},

@@ -35,7 +35,8 @@ import numpy as np
 from quaddance.choreo.choreographer import MIN_JERK_PEAK_SPEED, STYLES, min_jerk
 from quaddance.choreo.grid import MusicGrid, _moving_average
 from quaddance.errors import QuaddanceError
-from quaddance.targets import BODY_COLUMNS, BODY_LIMITS_FOUR_FEET, MIN_JERK_PEAK_ACCEL, BodyLimits
+from quaddance.robots import BodyLimits
+from quaddance.targets import BODY_COLUMNS, BODY_LIMITS_FOUR_FEET, MIN_JERK_PEAK_ACCEL
 
 #: Amplitude factor on a downbeat ("one" gets a bigger gesture).
 DOWNBEAT_BOOST = 1.3

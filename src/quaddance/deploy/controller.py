@@ -14,13 +14,11 @@ import torch
 from quaddance.deploy.robot import Reading
 from quaddance.errors import QuaddanceError
 from quaddance.play.policy import OnnxPolicy
-from quaddance.sim import go1
 from quaddance.sim.body import BodyFeedforward
 from quaddance.sim.feedforward import FrontLiftFeedforward
 from quaddance.sim.observations import ActorObservation, Measurement
 from quaddance.sim.state import yaw_from_quat
 from quaddance.sim.task import joint_targets
-from quaddance.targets import BODY_LIMITS_FOUR_FEET
 
 
 class DanceController:
@@ -55,11 +53,13 @@ class DanceController:
         self.action_scale = torch.tensor(spec.action_scale, dtype=torch.float32)
         ff = spec.front_feedforward
         self.feedforward = (
-            FrontLiftFeedforward(cfg.scene, self.dev, np.asarray(ff.thigh_calf_offsets_rad))
+            FrontLiftFeedforward(cfg.scene.robot, self.dev, np.asarray(ff.thigh_calf_offsets_rad))
             if cfg.front_feedforward and ff is not None
             else None
         )
-        self.body_feedforward = BodyFeedforward(cfg.scene, self.dev) if cfg.whole_body else None
+        self.body_feedforward = (
+            BodyFeedforward(cfg.scene.robot, self.dev) if cfg.whole_body else None
+        )
         self.step = 0  # dance step (policy ticks since dance time 0)
         self.heading_zero_rad = 0.0  # IMU yaw at dance time 0 (`reset`)
         self._fade: tuple[torch.Tensor, int, int] | None = None
@@ -67,8 +67,8 @@ class DanceController:
         #: trunk height it dances), so damping after the dance lets it down from lower.
         self.rest_row = torch.zeros(1, self.rows.shape[1])  # same columns as `rows`
         if cfg.whole_body:
-            self.rest_row[0, paws.shape[1]] = BODY_LIMITS_FOUR_FEET.height_offset_m[0]
-        self.last_action = torch.zeros(1, go1.NUM_JOINTS)
+            self.rest_row[0, paws.shape[1]] = cfg.scene.robot.body_four_feet.height_offset_m[0]
+        self.last_action = torch.zeros(1, cfg.scene.robot.num_joints)
         self._ids = torch.zeros(1, dtype=torch.long)
 
     @property
@@ -124,7 +124,7 @@ class DanceController:
         heading measured from here."""
         self.step = 0
         self._fade = None
-        self.last_action = torch.zeros(1, go1.NUM_JOINTS)
+        self.last_action = torch.zeros_like(self.last_action)
         quat = torch.as_tensor(np.asarray(reading.quat_wxyz), dtype=torch.float32)[None]
         self.heading_zero_rad = float(yaw_from_quat(quat)[0])
         prop = self.actor_obs.proprio(self.measurement(reading), self.last_action)

@@ -8,12 +8,9 @@ robot and passes every command through the SDK's own guards (``Safety.PositionLi
 ``Safety.PowerProtect`` at the chosen level) before sending; the 50 Hz runner only swaps the
 command that thread sends. Our safety layer (`quaddance.deploy.safety`) runs before that.
 
-Joint order: the SDK's motors are FR_0, FR_1, FR_2, FL_0, ... RL_2 (hip, thigh, calf per leg,
-legs FR, FL, RR, RL; the SDK's quadruped.h), which is quaddance's model order, and the
-angles follow the same URDF conventions (mjlab's go1.xml comes from Unitree's model): the
-nominal stand in Unitree's examples (0, 0.85, -1.75 per front leg) reads as ours does. So
-the map is the identity with signs +1, written out below so that a test holds it. The SDK's
-foot forces come in leg order FR, FL, RR, RL; quaddance's feet are FL, FR, RL, RR.
+The map from the SDK's motor and foot order to quaddance's (model joint order, task foot
+order) and the joint signs are the robot's (`RobotCfg.sdk_joint_index`, `sdk_joint_sign`,
+`sdk_foot_index`; for the Go1 the identity with signs +1, see `quaddance.robots.go1`).
 """
 
 from __future__ import annotations
@@ -26,7 +23,7 @@ import numpy as np
 
 from quaddance.deploy.robot import JointCommand, Reading, Robot
 from quaddance.errors import QuaddanceError
-from quaddance.sim import go1
+from quaddance.robots import GO1, RobotCfg
 
 LOWLEVEL = 0xFF  #: the SDK's low-level control flag
 SERVO_MODE = 0x0A  #: motor mode: PD servo (0x00 is idle)
@@ -34,12 +31,6 @@ ROBOT_IP = "192.168.123.10"  #: the Go1's motor controller board on its wired ne
 ROBOT_PORT = 8007
 LOCAL_PORT = 8080
 LOOP_S = 0.002  #: 500 Hz, the SDK examples' low-level loop
-
-#: SDK motor index of each model joint, and the sign turning an SDK angle into ours.
-SDK_INDEX: tuple[int, ...] = tuple(range(go1.NUM_JOINTS))
-SDK_SIGN: tuple[float, ...] = (1.0,) * go1.NUM_JOINTS
-#: SDK foot (FR, FL, RR, RL) for each quaddance foot (FL, FR, RL, RR).
-SDK_FOOT: tuple[int, ...] = (1, 0, 3, 2)
 
 
 def load_sdk() -> ModuleType:
@@ -53,12 +44,12 @@ def load_sdk() -> ModuleType:
     return robot_interface
 
 
-def fill_low_cmd(low_cmd, cmd: JointCommand) -> None:
+def fill_low_cmd(low_cmd, cmd: JointCommand, robot: RobotCfg) -> None:
     """Write a `JointCommand` (model order) into an SDK ``LowCmd``, servo mode."""
     low_cmd.levelFlag = LOWLEVEL
-    for j in range(go1.NUM_JOINTS):
-        m = low_cmd.motorCmd[SDK_INDEX[j]]
-        sign = SDK_SIGN[j]
+    for j in range(robot.num_joints):
+        m = low_cmd.motorCmd[robot.sdk_joint_index[j]]
+        sign = robot.sdk_joint_sign[j]
         m.mode = SERVO_MODE
         m.q = float(sign * cmd.q_rad[j])
         m.dq = float(sign * cmd.dq_rad_s[j])
@@ -67,14 +58,15 @@ def fill_low_cmd(low_cmd, cmd: JointCommand) -> None:
         m.tau = float(sign * cmd.tau_ff_nm[j])
 
 
-def reading_from_low_state(state) -> Reading:
+def reading_from_low_state(state, robot: RobotCfg) -> Reading:
     """An SDK ``LowState`` as a `Reading` (model joint order, quaddance foot order).
 
     ``seq`` is the robot's millisecond ``tick``: it advances with every new state.
     """
     ms = state.motorState
-    q = np.array([SDK_SIGN[j] * ms[SDK_INDEX[j]].q for j in range(go1.NUM_JOINTS)])
-    dq = np.array([SDK_SIGN[j] * ms[SDK_INDEX[j]].dq for j in range(go1.NUM_JOINTS)])
+    motors = list(zip(robot.sdk_joint_index, robot.sdk_joint_sign, strict=True))
+    q = np.array([sign * ms[i].q for i, sign in motors])
+    dq = np.array([sign * ms[i].dq for i, sign in motors])
     force = np.asarray(state.footForce, dtype=np.float64)
     return Reading(
         seq=int(state.tick),
@@ -83,7 +75,7 @@ def reading_from_low_state(state) -> Reading:
         gyro_rad_s=np.asarray(state.imu.gyroscope, dtype=np.float64),
         joint_pos_rad=q,
         joint_vel_rad_s=dq,
-        foot_force_n=force[list(SDK_FOOT)],  # raw sensor units on a Go1, not newtons
+        foot_force_n=force[list(robot.sdk_foot_index)],  # raw sensor units on a Go1, not newtons
     )
 
 
@@ -91,6 +83,7 @@ class Go1Robot(Robot):
     """`Robot` over the SDK's low-level UDP link, with its PositionLimit and PowerProtect."""
 
     name = "go1"
+    robot_cfg = GO1  #: the robot this SDK drives (its joint map and signs)
 
     def __init__(
         self,
@@ -141,12 +134,12 @@ class Go1Robot(Robot):
         while self._running:
             self._udp.Recv()
             self._udp.GetRecv(self._low_state)
-            reading = reading_from_low_state(self._low_state)
+            reading = reading_from_low_state(self._low_state, self.robot_cfg)
             with self._lock:
                 self._latest = reading
                 cmd = self._cmd
             if cmd is not None:
-                fill_low_cmd(self._low_cmd, cmd)
+                fill_low_cmd(self._low_cmd, cmd, self.robot_cfg)
                 self._safe.PositionLimit(self._low_cmd)
                 # Non-zero: the SDK intervened (it scales the command down and warns).
                 if self._safe.PowerProtect(self._low_cmd, self._low_state, self.power_level):

@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from quaddance.errors import InputFileError, QuaddanceError
+from quaddance.robots import RobotCfg
 
 ROBOTS: tuple[str, ...] = ("sim", "go1")
 
@@ -54,14 +55,17 @@ class DeployJob:
     sim_latency_ms: tuple[float, float] = (5.0, 20.0)
 
 
-def make_robot(job: DeployJob):
+def make_robot(job: DeployJob, robot: RobotCfg):
+    """The backend ``job.robot`` for the policy's ``robot`` (the simulator simulates it)."""
     if job.robot == "sim":
         from quaddance.deploy.sim_backend import SimRobot, SimRobotCfg
 
-        return SimRobot(SimRobotCfg(latency_ms=tuple(job.sim_latency_ms)))
+        return SimRobot(SimRobotCfg(latency_ms=tuple(job.sim_latency_ms), robot=robot.name))
     if job.robot == "go1":
         from quaddance.deploy.go1_backend import Go1Robot, load_sdk
 
+        if robot != Go1Robot.robot_cfg:
+            raise QuaddanceError(f"--robot go1 drives a Go1, but the policy is for {robot.name}")
         load_sdk()  # the missing-SDK error before anything else happens
         return Go1Robot(job.robot_ip, job.power_level)
     raise QuaddanceError(f"--robot must be one of {', '.join(ROBOTS)}, got {job.robot!r}")
@@ -131,7 +135,7 @@ def run_deploy(job: DeployJob, status: Callable[[str], None] = lambda m: None) -
             seconds=job.seconds, auto_start=job.auto_start, inject=job.inject, song=song
         )
         runner = Runner(
-            make_robot(job),
+            make_robot(job, policy.task.scene.robot),
             policy,
             dance.targets_m,
             options,

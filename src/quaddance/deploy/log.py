@@ -15,7 +15,6 @@ from quaddance.deploy.robot import JointCommand, Reading, Robot
 from quaddance.deploy.safety import Safety, roll_pitch_rad
 from quaddance.deploy.states import STATES, DeployState
 from quaddance.play.policy import OnnxPolicy
-from quaddance.sim import go1
 
 
 @dataclass
@@ -27,14 +26,18 @@ class Tick:
     state_before: DeployState
     t_dance: float = math.nan
     cmd: JointCommand | None = None
-    tau_est: np.ndarray = field(default_factory=lambda: np.full(go1.NUM_JOINTS, np.nan))
-    action: np.ndarray = field(default_factory=lambda: np.full(go1.NUM_JOINTS, np.nan))
+    tau_est: np.ndarray = field(init=False)  #: NaN per joint until a command is made
+    action: np.ndarray = field(init=False)
     feet: np.ndarray = field(default_factory=lambda: np.full(4, np.nan))
     targets: np.ndarray = field(default_factory=lambda: np.full(4, np.nan))
     body_targets: np.ndarray = field(default_factory=lambda: np.full(4, np.nan))
     trunk_m: float = math.nan  #: trunk height above the lowest foot, kinematic estimate
     held: bool = False
     infer_s: float = math.nan
+
+    def __post_init__(self) -> None:
+        self.tau_est = np.full(self.reading.joint_pos_rad.shape, np.nan)
+        self.action = np.full(self.reading.joint_pos_rad.shape, np.nan)
 
 
 @dataclass

@@ -2,7 +2,7 @@
 
 A backend reads the robot's latest measurements and sends joint commands; nothing else
 crosses this line. Joint arrays are in quaddance's MODEL order (FR, FL, RR, RL x hip,
-thigh, calf: `quaddance.sim.go1.JOINT_NAMES`), feet in the task order (FL, FR, RL, RR).
+thigh, calf: `quaddance.robots.RobotCfg.joint_names`), feet in the task order (FL, FR, RL, RR).
 """
 
 from __future__ import annotations
@@ -14,8 +14,6 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
-
-from quaddance.sim import go1
 
 #: Faults a backend may offer for `deploy --inject FAULT@T` (the sim backend has them all):
 #: a shove that topples the robot, the state stream stopping, a NaN encoder, +50 ms latency.
@@ -58,8 +56,9 @@ class JointCommand:
     @classmethod
     def damping(cls, q_rad: np.ndarray, kd: float) -> JointCommand:
         """No stiffness, only joint damping: what the robot does when it gives up."""
-        zero = np.zeros(go1.NUM_JOINTS)
-        return cls(np.asarray(q_rad, dtype=float).copy(), zero, zero, np.full_like(zero, kd), zero)
+        q = np.asarray(q_rad, dtype=float).copy()
+        zero = np.zeros_like(q)
+        return cls(q, zero, zero, np.full_like(zero, kd), zero)
 
     def is_finite(self) -> bool:
         parts = (self.q_rad, self.dq_rad_s, self.kp, self.kd, self.tau_ff_nm)

@@ -20,11 +20,10 @@ from quaddance.deploy.console import StopSignals
 from quaddance.deploy.controller import DanceController
 from quaddance.deploy.log import LOG_KEYS, DeployResult, Tick, append_row, summarize
 from quaddance.deploy.robot import JointCommand, Reading, Robot, realtime_priority
-from quaddance.deploy.safety import Safety, SafetyCfg, go1_joint_range_rad
+from quaddance.deploy.safety import Safety, SafetyCfg, joint_range_rad
 from quaddance.deploy.state_machine import DanceStates
 from quaddance.deploy.states import DeployState
 from quaddance.play.policy import OnnxPolicy
-from quaddance.sim import go1
 from quaddance.sim.kinematics import foot_pos_b
 
 #: Real-time priority of the runner; the simulated robot's (a separate machine's motor
@@ -78,10 +77,11 @@ class Runner:
         self.dance_steps = n
         self.safety = Safety(
             options.safety,
+            robot=cfg.scene.robot,
             kp=policy.spec.kp,
             kd=policy.spec.kd,
             nominal_rad=np.asarray(policy.spec.nominal_joint_pos_rad, dtype=np.float64),
-            joint_range_rad=go1_joint_range_rad(),
+            joint_range_rad=joint_range_rad(cfg.scene.robot),
         )
         self.geom = self.ctrl.actor_obs.geom
 
@@ -94,7 +94,7 @@ class Runner:
         # Foot centres along world up, trunk frame origin at 0 (kinematics.py's estimator
         # subtracts the lowest one; the trunk height is minus it).
         z = foot_pos_b(meas.joint_pos_rad, self.geom)[0].numpy() @ (-g / np.linalg.norm(g))
-        return g, z - z.min(), float(-z.min()) + go1.FOOT_RADIUS_M
+        return g, z - z.min(), float(-z.min()) + self.ctrl.cfg.scene.robot.foot_radius_m
 
     # --- the loop --------------------------------------------------------------------------
     def run(self) -> DeployResult:
@@ -116,7 +116,7 @@ class Runner:
         try:
             if q is not None:
                 for _ in range(10):
-                    self.robot.send(JointCommand.damping(q, self.opt.safety.damp_kd))
+                    self.robot.send(JointCommand.damping(q, self.safety.limits.damp_kd))
                     time.sleep(self.tick_s)
         finally:
             self.robot.close()

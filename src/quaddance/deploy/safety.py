@@ -16,26 +16,21 @@ import numpy as np
 
 from quaddance.deploy.robot import JointCommand, Reading
 from quaddance.deploy.states import DeployState
-from quaddance.sim import go1
+from quaddance.robots import RobotCfg
 
 
 def soft_joint_limits_rad(joint_range_rad: np.ndarray, margin_rad: float) -> np.ndarray:
-    """(12, 2) target limits: each joint's range (mjlab's go1.xml) less ``margin_rad`` at
+    """(12, 2) target limits: each joint's range (the robot's model) less ``margin_rad`` at
     both ends. Not the task's 0.9-of-range reward limits: the front-lift feed-forward asks
     the calves for -2.70 rad at 0.25 m, inside the range (-2.82) but outside 0.9 of it."""
     return np.stack([joint_range_rad[:, 0] + margin_rad, joint_range_rad[:, 1] - margin_rad], 1)
 
 
-def go1_joint_range_rad() -> np.ndarray:
-    """(12, 2) joint ranges of the model, rad (read from the scene's MJCF: one source)."""
-    from quaddance.sim.scene import build_model
+def joint_range_rad(robot: RobotCfg) -> np.ndarray:
+    """(12, 2) joint ranges of the robot's model, rad (read from its MJCF: one source)."""
+    from quaddance.sim.scene import SceneCfg, build_model
 
-    return np.asarray(build_model().jnt_range[1:], dtype=np.float64)
-
-
-def effort_limits_nm() -> np.ndarray:
-    """(12,) motor torque limits, model order (`quaddance.sim.go1`)."""
-    return np.array([go1.effort_limit_nm(n) for n in go1.JOINT_NAMES])
+    return np.asarray(build_model(SceneCfg(robot=robot)).jnt_range[1:], dtype=np.float64)
 
 
 def roll_pitch_rad(
@@ -50,7 +45,8 @@ def roll_pitch_rad(
 
 @dataclass(frozen=True)
 class SafetyCfg:
-    """Limits and timings of the safety layer; ticks are policy ticks (50 Hz)."""
+    """Timings of the safety layer; ticks are policy ticks (50 Hz). Its limits are the
+    robot's (`RobotCfg.safety_limits`)."""
 
     passive_s: float = 0.5  #: damping before the soft start (the pose is measured at its end)
     stand_s: float = 2.5  #: soft start duration (the issue asks >= 2 s; unitree_rl_gym: 2 s)
@@ -67,12 +63,7 @@ class SafetyCfg:
     done_stand_s: float = 2.0
     done_damp_s: float = 1.0  #: then damping before the runner exits
     damp_hold_s: float = 1.0  #: damping commands sent after a fault before exiting
-    damp_kd: float = 1.0  #: N m s / rad, joint damping of the damping mode
-    max_roll_pitch_rad: float = 0.8  #: beyond: damp (WTW crouches at 1.6; we stop earlier)
-    min_trunk_height_m: float = 0.15  #: trunk above the lowest foot (nominal 0.27): collapse
     stale_ticks: int = 3  #: this many ticks in a row without a new state: damp
-    max_target_step_rad: float = 0.35  #: largest change of a joint target per tick
-    soft_limit_margin_rad: float = 0.03  #: targets stay this far inside the joint range
     inference_budget_s: float = 0.010  #: half a tick: past it the last command is held
 
 
@@ -107,6 +98,7 @@ class Safety:
     """The state machine and the per-tick guards; the runner drives it, one call per tick."""
 
     cfg: SafetyCfg
+    robot: RobotCfg
     kp: float
     kd: float
     nominal_rad: np.ndarray
@@ -116,8 +108,9 @@ class Safety:
     counts: GuardCounts = field(default_factory=GuardCounts)
 
     def __post_init__(self) -> None:
-        self.limits_nm = effort_limits_nm()
-        self.soft = soft_joint_limits_rad(self.joint_range_rad, self.cfg.soft_limit_margin_rad)
+        self.limits = self.robot.safety_limits
+        self.limits_nm = np.asarray(self.robot.effort_limit_nm)
+        self.soft = soft_joint_limits_rad(self.joint_range_rad, self.limits.soft_limit_margin_rad)
         self.entered_s = 0.0  # runner time when the current state began
         self.last_target: np.ndarray | None = None
         self._last_seq: int | None = None
@@ -154,12 +147,12 @@ class Safety:
     def check_posture(self, gravity_b: np.ndarray, trunk_height_m: float) -> str | None:
         """Toppling or collapsing: roll/pitch past the limit, or the trunk too low."""
         roll, pitch = roll_pitch_rad(gravity_b)
-        lim = self.cfg.max_roll_pitch_rad
+        lim = self.limits.max_roll_pitch_rad
         if abs(roll) > lim or abs(pitch) > lim:
             return f"roll {roll:+.2f} / pitch {pitch:+.2f} rad past {lim:g}"
         if (
             self.state in (DeployState.READY, DeployState.DANCE)
-            and trunk_height_m < self.cfg.min_trunk_height_m
+            and trunk_height_m < self.limits.min_trunk_height_m
         ):
             return f"trunk collapsing ({trunk_height_m:.3f} m above the feet)"
         return None
@@ -168,7 +161,7 @@ class Safety:
     def damping_command(self, q_meas_rad: np.ndarray) -> JointCommand:
         q = np.where(np.isfinite(q_meas_rad), q_meas_rad, 0.0)
         self.last_target = None
-        return JointCommand.damping(q, self.cfg.damp_kd)
+        return JointCommand.damping(q, self.limits.damp_kd)
 
     def stand_target(self, now_s: float) -> tuple[np.ndarray, float]:
         """Soft start: target and kp at ``now_s`` in `stand` (smoothstep from the measured
@@ -189,7 +182,7 @@ class Safety:
         target = np.clip(q_target, self.soft[:, 0], self.soft[:, 1])
         self.counts.soft_limit += int(not np.array_equal(target, q_target))
         if self.last_target is not None:
-            step = self.cfg.max_target_step_rad
+            step = self.limits.max_target_step_rad
             stepped = np.clip(target, self.last_target - step, self.last_target + step)
             self.counts.target_step += int(not np.array_equal(stepped, target))
             target = stepped
@@ -199,6 +192,6 @@ class Safety:
             self.counts.torque += 1
             target = q + (tau_ok + self.kd * dq) / kp
         self.last_target = target
-        z = np.zeros(go1.NUM_JOINTS)
+        z = np.zeros(self.robot.num_joints)
         cmd = JointCommand(target, z, np.full_like(z, kp), np.full_like(z, self.kd), z.copy())
         return cmd, tau_est

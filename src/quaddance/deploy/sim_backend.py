@@ -36,9 +36,8 @@ import numpy as np
 
 from quaddance.children import ignore_sigint, sigint_blocked_for_children
 from quaddance.deploy.robot import FAULTS, JointCommand, Reading, Robot, realtime_priority
-from quaddance.deploy.safety import effort_limits_nm
 from quaddance.errors import QuaddanceError
-from quaddance.sim import go1
+from quaddance.robots import GO1, get_robot
 from quaddance.sim.scene import SceneCfg, build_spec
 
 LOOPBACK = "127.0.0.1"
@@ -76,6 +75,7 @@ class SimRobotCfg:
     push_vel_m_s: tuple[float, float, float] = (0.0, 3.0, 0.0)  #: ``push`` fault, world frame
     push_roll_rad_s: float = 16.0  #: ``push`` fault: roll rate added, rad/s
     seed: int = 0
+    robot: str = GO1.name  #: the robot simulated (`quaddance.robots.ROBOTS`)
 
     def to_json(self) -> str:
         return json.dumps(dataclasses.asdict(self))
@@ -89,7 +89,9 @@ class SimRobotCfg:
 def build_torque_model(cfg: SimRobotCfg) -> mujoco.MjModel:
     """The Go1 scene with torque motors (limited to the Go1's effort limits) instead of the
     training scene's position actuators; same bodies, joints, sensors and home pose."""
-    scene = SceneCfg(timestep_s=cfg.physics_dt_s, foot_friction=cfg.foot_friction)
+    scene = SceneCfg(
+        robot=get_robot(cfg.robot), timestep_s=cfg.physics_dt_s, foot_friction=cfg.foot_friction
+    )
     spec = build_spec(scene, visual=False)
     for act in spec.actuators:
         act.set_to_motor()  # ctrl is a torque, N m; forcerange (motor limits) stays
@@ -110,31 +112,33 @@ class _SimProcess:
         mujoco.mj_resetDataKeyframe(self.model, self.data, self.model.key("home").id)
         self.data.ctrl[:] = 0.0
         mujoco.mj_forward(self.model, self.data)
-        self.limits = effort_limits_nm()
-        self.offset = self.rng.uniform(-1, 1, go1.NUM_JOINTS) * cfg.encoder_offset_rad
+        robot = self.robot = get_robot(cfg.robot)
+        n = robot.num_joints
+        self.limits = np.asarray(robot.effort_limit_nm)
+        self.offset = self.rng.uniform(-1, 1, n) * cfg.encoder_offset_rad
         self.runner = (LOOPBACK, runner_port)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind((LOOPBACK, 0))
         self.sock.setblocking(False)
         # Motor boards start passive (no command yet): zero torque.
-        z = np.zeros(go1.NUM_JOINTS)
+        z = np.zeros(n)
         self.cmd = JointCommand(self.data.qpos[7:].copy(), z, z.copy(), z.copy(), z.copy())
         self.cmd_queue: deque[tuple[float, JointCommand]] = deque()
         self.state_queue: deque[tuple[float, bytes]] = deque()
         self.last_state_due = 0.0
         self.last_cmd_due = 0.0
-        self.tau = np.zeros(go1.NUM_JOINTS)
+        self.tau = np.zeros(n)
         self.seq = 0
         self.frozen = False
         self.encoder_failed = False
         self.extra_lag_s = 0.0
         self.running = True
-        self.foot_geoms = [self.model.geom(f"{f}_foot_collision").id for f in go1.FEET]
-        self.trunk_geoms = {self.model.geom(n).id for n in ("trunk_collision", "head_collision")}
+        self.foot_geoms = [self.model.geom(g).id for g in robot.foot_geoms]
+        trunk = self.model.body(robot.trunk_body).id
+        self.trunk_geoms = {int(g) for g in np.flatnonzero(self.model.geom_bodyid == trunk)}
         self.floor = self.model.geom("floor").id
         self.foot_of_geom = {g: i for i, g in enumerate(self.foot_geoms)}
-        self.foot_sites = [self.model.site(f).id for f in go1.FEET]
-        n = go1.NUM_JOINTS
+        self.foot_sites = [self.model.site(s).id for s in robot.foot_sites]
         self.noise_std = np.concatenate(
             [
                 np.full(n, cfg.encoder_noise_rad),
@@ -173,7 +177,9 @@ class _SimProcess:
                 return
             kind = msg[:1]
             if kind == b"C" and len(msg) == _CMD.size:
-                v = np.asarray(_CMD.unpack(msg)[2:], dtype=np.float64).reshape(5, go1.NUM_JOINTS)
+                v = np.asarray(_CMD.unpack(msg)[2:], dtype=np.float64).reshape(
+                    5, self.robot.num_joints
+                )
                 cmd = JointCommand(v[0], v[1], v[2], v[3], v[4])
                 # Messages keep their order: never due before the one sent earlier.
                 due = max(self.last_cmd_due, now + self._delay_s())
@@ -246,7 +252,7 @@ class _SimProcess:
         t["time_s"][i] = d.time
         t["mono_s"][i] = mono_s
         t["late_s"][i] = time.monotonic() - mono_s  # how far physics ran behind the clock
-        t["feet_m"][i] = d.site_xpos[self.foot_sites, 2] - go1.FOOT_RADIUS_M
+        t["feet_m"][i] = d.site_xpos[self.foot_sites, 2] - self.robot.foot_radius_m
         t["base_height_m"][i] = d.qpos[2]
         up_z = 1 - 2 * (d.qpos[4] ** 2 + d.qpos[5] ** 2)  # world z of the trunk's z axis
         t["tilt_rad"][i] = np.arccos(np.clip(up_z, -1.0, 1.0))

@@ -146,6 +146,7 @@ class _LiveFeed:
 
     queue: Any
     viewer: Any = None
+    standing_m: float = 0.0  #: the viewer's trunk height before the estimate is there
     beats_s: list[float] = field(default_factory=list)
     downbeats_s: list[float] = field(default_factory=list)
     tempo: list[tuple[float, float, bool]] = field(default_factory=list)
@@ -194,7 +195,7 @@ class _LiveFeed:
             self._newest_arrival = None
         if self.viewer is not None:
             r = tick.reading
-            height = tick.trunk_m if np.isfinite(tick.trunk_m) else 0.27
+            height = tick.trunk_m if np.isfinite(tick.trunk_m) else self.standing_m
             qpos = np.concatenate([[0.0, 0.0, height], r.quat_wxyz, r.joint_pos_rad])
             self.viewer.update(qpos)
             self.viewer.set_status(
@@ -258,11 +259,13 @@ def run_live(job: LiveJob, status=lambda msg: None) -> tuple[dict, dict[str, Pat
             duration_s = min(duration_s, job.seconds)
         if job.viewer:
             from quaddance.live.viewer import LiveViewer
-            from quaddance.sim.scene import SceneCfg, build_model
+            from quaddance.sim.scene import build_model
 
-            viewer = LiveViewer(build_model(SceneCfg(), visual=True), host=job.host, port=job.port)
+            viewer = LiveViewer(
+                build_model(policy.task.scene, visual=True), host=job.host, port=job.port
+            )
             status(f"viewer: {', '.join(viewer.urls)}")
-        feed = _LiveFeed(updates, viewer)
+        feed = _LiveFeed(updates, viewer, policy.task.scene.robot.standing_height_m)
         options = DeployOptions(
             seconds=duration_s, auto_start=True, song=job.from_file, song_start_s=job.start_s
         )
@@ -273,7 +276,8 @@ def run_live(job: LiveJob, status=lambda msg: None) -> tuple[dict, dict[str, Pat
                 sim_latency_ms=job.sim_latency_ms,
                 robot_ip=job.robot_ip,
                 power_level=job.power_level,
-            )
+            ),
+            policy.task.scene.robot,
         )
         runner = Runner(
             robot,

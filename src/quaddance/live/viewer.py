@@ -33,6 +33,7 @@ import mujoco
 import numpy as np
 
 from quaddance.errors import QuaddanceError
+from quaddance.robots import GO1, ROBOTS, get_robot
 
 if TYPE_CHECKING:  # viser takes seconds to import: only LiveViewer() imports it.
     import viser
@@ -179,7 +180,7 @@ def _quiet_stdout() -> Iterator[None]:
 class LiveViewer:
     """A web page showing the robot live, the tempo, the lock, the beats and the move.
 
-    `model` is the scene model (`quaddance.sim.scene.build_model(SceneCfg(), visual=True)`
+    `model` is the scene model (`quaddance.sim.scene.build_model(scene, visual=True)`
     for the meshes; a `visual=False` model shows collision shapes). `host="0.0.0.0"` lets
     other machines watch; `port=0` takes a free port. If `port` is taken, viser moves to the
     next free one: `self.port` and `self.urls` say where it went.
@@ -399,11 +400,14 @@ def _demo_pose(home_qpos: np.ndarray, t_s: float, beat_s: float) -> np.ndarray:
     return qpos
 
 
-def run_demo(host: str, port: int, seconds: float | None, beat_s: float = 0.5) -> None:
-    """The robot standing, a fake beat each `beat_s` (downbeat every 4th), until stopped."""
+def run_demo(
+    host: str, port: int, seconds: float | None, beat_s: float = 0.5, robot: str = GO1.name
+) -> None:
+    """``robot`` (`quaddance.robots.ROBOTS`) standing, a fake beat each `beat_s` (downbeat
+    every 4th), until stopped."""
     from quaddance.sim.scene import SceneCfg, build_model
 
-    model = build_model(SceneCfg(), visual=True)
+    model = build_model(SceneCfg(robot=get_robot(robot)), visual=True)
     with LiveViewer(model, host=host, port=port) as viewer:
         home_qpos = viewer.home_qpos()
         start_s = time.perf_counter()
@@ -427,11 +431,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--host", default=DEFAULT_HOST, help="0.0.0.0: other machines too")
     parser.add_argument("--port", type=int, default=DEFAULT_PORT)
     parser.add_argument("--seconds", type=float, default=None, help="stop after this long")
+    parser.add_argument("--robot", default=GO1.name, choices=sorted(ROBOTS), help="robot shown")
     args = parser.parse_args(argv)
     if not args.demo:
         parser.error("only --demo is available here; `quaddance live --viewer` is the real use")
     try:
-        run_demo(args.host, args.port, args.seconds)
+        run_demo(args.host, args.port, args.seconds, robot=args.robot)
     except QuaddanceError as exc:
         print(f"quaddance: error: {exc}", file=sys.stderr)
         return 2

@@ -10,12 +10,13 @@ import numpy as np
 
 from quaddance.errors import InputFileError
 from quaddance.play.policy_spec import PolicySpec
+from quaddance.robots import GO1, RobotCfg
 from quaddance.sim.config import DanceTaskCfg
 
 
-def shipped_policy_path() -> Path:
-    """The policy that ships with the package (trained with `quaddance train`)."""
-    return Path(str(resources.files("quaddance") / "data" / "policies" / "go1_dance.onnx"))
+def shipped_policy_path(robot: RobotCfg = GO1) -> Path:
+    """The policy for ``robot`` that ships with the package (trained with `quaddance train`)."""
+    return Path(str(resources.files("quaddance") / "data" / "policies" / robot.policy))
 
 
 @dataclass

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import functools
 import json
 import math
 from dataclasses import dataclass, field
@@ -26,14 +27,9 @@ from typing import Any
 import numpy as np
 
 from quaddance.errors import InputFileError
-from quaddance.sim import go1
+from quaddance.robots import GO1, ROBOTS, RobotCfg, get_robot
 from quaddance.sim.config import DanceTaskCfg, DomainRandCfg, ObsCfg, RewardCfg
 from quaddance.sim.scene import SceneCfg
-
-# The feed-forward table's heights, m: quaddance.sim.feedforward.LUT_HEIGHTS_M (a test holds
-# them equal), not imported from there because that module imports torch (4 s) and a reader
-# of this file (playback, a robot) does not need it.
-LUT_HEIGHTS_M = np.round(np.linspace(0.0, 0.45, 46), 4)
 
 FORMAT = "quaddance-policy/1"
 """Schema version written in ``format``."""
@@ -130,15 +126,16 @@ class PolicySpec:
     task: dict[str, Any]  # as in the file; `task_cfg` builds the dataclasses
     targets_max_height_m: float
     training: dict[str, Any] = field(default_factory=dict)
-    robot: str = "unitree_go1"
+    robot: str = GO1.name
     format: str = FORMAT
 
     @property
     def task_cfg(self) -> DanceTaskCfg:
         """The task settings the policy was trained with."""
         task = dict(self.task)
+        task.setdefault("scene", {})  # the robot is the file's top-level `robot`
         parts = {
-            "scene": SceneCfg,
+            "scene": functools.partial(SceneCfg, robot=get_robot(self.robot)),
             "rewards": RewardCfg,
             "domain_rand": DomainRandCfg,
             "obs": ObsCfg,
@@ -244,17 +241,18 @@ class PolicySpec:
         if fmt != FORMAT:
             r.fail("format", f"{fmt!r} is not a policy format this quaddance reads ({FORMAT})")
         robot = r.text(obj, "robot")
-        if robot != "unitree_go1":
-            r.fail("robot", f"{robot!r}; this quaddance plays unitree_go1 policies")
-        joints = r.texts(obj, "joint_names", len(go1.JOINT_NAMES))
-        if joints != go1.JOINT_NAMES:
-            r.fail("joint_names", f"must be the Go1's joints in order {go1.JOINT_NAMES[0]}, ...")
-        feet = r.texts(obj, "feet", len(go1.FEET))
-        if feet != go1.FEET:
-            r.fail("feet", f"must be {', '.join(go1.FEET)}")
+        if robot not in ROBOTS:
+            r.fail("robot", f"{robot!r}; this quaddance plays {', '.join(ROBOTS)} policies")
+        cfg = ROBOTS[robot]
+        joints = r.texts(obj, "joint_names", cfg.num_joints)
+        if joints != cfg.joint_names:
+            r.fail("joint_names", f"must be the {robot} joints in order {cfg.joint_names[0]}, ...")
+        feet = r.texts(obj, "feet", len(cfg.feet))
+        if feet != cfg.feet:
+            r.fail("feet", f"must be {', '.join(cfg.feet)}")
         task = _read_task(r, obj)
         has_ff = task.get("front_feedforward", DanceTaskCfg.front_feedforward)
-        ff = _read_feedforward(r, obj["front_feedforward"], needed=has_ff)
+        ff = _read_feedforward(r, obj["front_feedforward"], has_ff, cfg)
         spec = cls(
             format=fmt,
             version=r.text(obj, "version", max_chars=64),
@@ -263,9 +261,9 @@ class PolicySpec:
             feet=feet,
             foot_height=r.text(obj, "foot_height"),
             nominal_joint_pos_rad=r.numbers(
-                obj, "nominal_joint_pos_rad", go1.NUM_JOINTS, -math.pi, math.pi
+                obj, "nominal_joint_pos_rad", cfg.num_joints, -math.pi, math.pi
             ),
-            action_scale=r.numbers(obj, "action_scale", go1.NUM_JOINTS, 1e-6, 10.0),
+            action_scale=r.numbers(obj, "action_scale", cfg.num_joints, 1e-6, 10.0),
             joint_target=r.text(obj, "joint_target"),
             front_feedforward=ff,
             kp=r.number(obj, "kp", 1e-6, 1000.0),
@@ -293,6 +291,14 @@ _TOP_KEYS = (
     "action_scale", "joint_target", "front_feedforward", "kp", "kd", "policy_hz", "sim_dt_s",
     "decimation", "obs", "task", "targets", "training",
 )  # fmt: skip
+
+
+def task_dict(task: DanceTaskCfg) -> dict[str, Any]:
+    """``task`` as the policy JSON's ``task`` holds it: without the robot, which the file's
+    top-level ``robot`` names."""
+    out = dataclasses.asdict(task)
+    del out["scene"]["robot"]
+    return out
 
 
 def _plain(value: Any) -> Any:
@@ -394,7 +400,10 @@ def _short(value: Any) -> str:
     return text if len(text) <= 40 else text[:37] + "..."
 
 
-def _read_feedforward(r: _Reader, value: Any, needed: bool) -> FeedForwardSpec | None:
+def _read_feedforward(
+    r: _Reader, value: Any, needed: bool, robot: RobotCfg
+) -> FeedForwardSpec | None:
+    """The table, which must have the robot's heights (`FrontLiftCfg.heights_m`)."""
     if value is None:
         if needed:
             r.fail("front_feedforward", "is missing but task.front_feedforward is true")
@@ -402,10 +411,12 @@ def _read_feedforward(r: _Reader, value: Any, needed: bool) -> FeedForwardSpec |
     keys = ("heights_m", "thigh_calf_offsets_rad", "applies_to", "interpolation")
     obj = r.obj(value, "front_feedforward", required=keys)
     p = "front_feedforward."
-    n = LUT_HEIGHTS_M.size
+    heights_m = robot.front_lift.heights_m
+    n = heights_m.size
     heights = r.numbers(obj, "heights_m", n, 0.0, 1.0, p)
-    if not np.allclose(heights, LUT_HEIGHTS_M, atol=1e-6):
-        r.fail(p + "heights_m", f"must be the table heights 0, 0.01, ... {LUT_HEIGHTS_M[-1]:g} m")
+    if not np.allclose(heights, heights_m, atol=1e-6):
+        step = heights_m[1] - heights_m[0]
+        r.fail(p + "heights_m", f"must be the table heights 0, {step:g}, ... {heights_m[-1]:g} m")
     rows = obj["thigh_calf_offsets_rad"]
     if not isinstance(rows, list | tuple) or len(rows) != n:
         r.fail(p + "thigh_calf_offsets_rad", f"must be a list of {n} [thigh, calf] pairs")
@@ -421,8 +432,9 @@ def _read_feedforward(r: _Reader, value: Any, needed: bool) -> FeedForwardSpec |
         for i, row in enumerate(rows)
     )
     applies = obj["applies_to"]
-    if not isinstance(applies, list | tuple) or list(applies) not in (["FL", "FR"], ["FL"], ["FR"]):
-        r.fail(p + "applies_to", "must be the front feet FL, FR")
+    front = list(robot.feet[:2])
+    if not isinstance(applies, list | tuple) or list(applies) not in (front, front[:1], front[1:]):
+        r.fail(p + "applies_to", f"must be the front feet {', '.join(front)}")
     return FeedForwardSpec(heights, table, tuple(applies), r.text(obj, "interpolation", prefix=p))
 
 
@@ -482,6 +494,8 @@ def _read_task(r: _Reader, obj: dict) -> dict[str, Any]:
 
 def _read_dataclass(r: _Reader, value: Any, default: Any, name: str) -> dict[str, Any]:
     fields = {f.name: getattr(default, f.name) for f in dataclasses.fields(default)}
+    # The robot is the file's top-level ``robot`` (`task_dict`), not a field of ``task``.
+    fields = {k: v for k, v in fields.items() if not isinstance(v, RobotCfg)}
     obj = r.obj(value, name, optional=tuple(fields))
     out: dict[str, Any] = {}
     for key, value in obj.items():

@@ -12,9 +12,8 @@ from __future__ import annotations
 
 import torch
 
-from quaddance.sim import go1
+from quaddance.robots import RobotCfg
 from quaddance.sim.kinematics import LegGeometry, foot_pos_b, leg_geometry
-from quaddance.sim.scene import SceneCfg
 
 BODY_DIM = 4  # height offset, roll, pitch, yaw
 
@@ -33,12 +32,12 @@ def leg_ik(foot_b: torch.Tensor, geom: LegGeometry) -> torch.Tensor:
     """(N, 4, 3) foot sphere centres in the trunk frame (task foot order FL, FR, RL, RR) ->
     (N, 12) joint angles in model order, the inverse of `kinematics.foot_pos_b`.
 
-    Closed form for the Go1's chain (hip about x; thigh and calf about y; the thigh offset
+    Closed form for a Go1-like chain (hip about x; thigh and calf about y; the thigh offset
     is lateral and both links point straight down at zero angle, as `leg_geometry` checks).
     Out-of-reach points are pulled onto the workspace boundary instead of giving NaN.
     """
     t = lambda name: geom.tensor(name, foot_b)  # noqa: E731
-    ty = t("thigh_offset")[:, 1]  # (4,) +-0.08 m: left legs +
+    ty = t("thigh_offset")[:, 1]  # (4,) lateral thigh offset, m: left legs +
     l2 = -t("calf_offset")[:, 2]  # thigh link length
     l3 = -t("foot_offset")[:, 2]  # calf link length
     d = foot_b - t("hip_pos_b")
@@ -49,12 +48,13 @@ def leg_ik(foot_b: torch.Tensor, geom: LegGeometry) -> torch.Tensor:
     vx = d[..., 0]
     r2 = (vx**2 + vz**2).clamp(max=(l2 + l3) ** 2 * 0.9999)
     cos_knee = ((r2 - l2**2 - l3**2) / (2 * l2 * l3)).clamp(-1.0, 1.0)
-    calf = -torch.acos(cos_knee)  # the Go1's knees bend backwards: calf angles < 0
+    calf = -torch.acos(cos_knee)  # knees bend backwards (as the Go1's): calf angles < 0
     phi = torch.atan2(-vx, -vz)  # direction of the foot from straight down
     thigh = phi - torch.atan2(l3 * torch.sin(calf), l2 + l3 * torch.cos(calf))
     q_task = torch.stack([hip, thigh, calf], -1)  # (N, 4 feet, 3)
-    out = torch.empty(foot_b.shape[0], go1.NUM_JOINTS, dtype=foot_b.dtype, device=foot_b.device)
-    out[:, t("joint_cols").reshape(-1)] = q_task.reshape(-1, go1.NUM_JOINTS)
+    n_joints = q_task.shape[1] * q_task.shape[2]
+    out = torch.empty(foot_b.shape[0], n_joints, dtype=foot_b.dtype, device=foot_b.device)
+    out[:, t("joint_cols").reshape(-1)] = q_task.reshape(-1, n_joints)
     return out
 
 
@@ -62,9 +62,9 @@ class BodyFeedforward:
     """Batched map (N, 4) body targets -> (N, 12) joint offsets from the nominal pose (rad,
     model order) that hold all four feet where they stand while the trunk takes the pose."""
 
-    def __init__(self, scene: SceneCfg, device: torch.device | str = "cpu") -> None:
-        self.geom = leg_geometry(scene)
-        nominal = torch.tensor(go1.nominal_joint_pos(), dtype=torch.float32)[None]
+    def __init__(self, robot: RobotCfg, device: torch.device | str = "cpu") -> None:
+        self.geom = leg_geometry(robot)
+        nominal = torch.tensor(robot.nominal_joint_pos_rad, dtype=torch.float32)[None]
         self.nominal = nominal.to(device)
         self.feet0_b = foot_pos_b(nominal, self.geom).to(device)  # (1, 4, 3)
         self.q0 = leg_ik(self.feet0_b, self.geom)  # the nominal pose through the same IK

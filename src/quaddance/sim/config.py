@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 from quaddance.sim.scene import SceneCfg
@@ -38,7 +39,7 @@ class RewardCfg:
     collision: float = -5.0
     base_orientation: float = -1.0
     base_height: float = -10.0
-    base_height_target_m: float = 0.27
+    base_height_target_m: float | None = None  # None: the robot's `standing_height_m`
     joint_limits: float = -10.0
     foot_slip: float = -0.04
     # Ours: -20 per m/s slid; a foot creeping 1 cm/s costs what 0.7 mm of paw error does.
@@ -131,12 +132,26 @@ class DanceTaskCfg:
     # rewards track them, and a body feed-forward (quaddance.sim.body) moves all four legs
     # to hold the feet still while the trunk takes the pose.
     whole_body: bool = False
-    max_tilt_rad: float = 1.0  # termination
-    min_base_height_m: float = 0.12  # termination
+    # Terminations; None: the robot's (`RobotCfg.max_tilt_rad`, `min_base_height_m`).
+    max_tilt_rad: float | None = None
+    min_base_height_m: float | None = None
     scene: SceneCfg = field(default_factory=SceneCfg)
     rewards: RewardCfg = field(default_factory=RewardCfg)
     domain_rand: DomainRandCfg = field(default_factory=DomainRandCfg)
     obs: ObsCfg = field(default_factory=ObsCfg)
+
+    def __post_init__(self) -> None:
+        # The robot's numbers are filled in here, so that a saved task (the policy JSON's
+        # ``task``) records them (`SceneCfg` does the same for the gains).
+        robot = self.scene.robot
+        if self.max_tilt_rad is None:
+            self.max_tilt_rad = robot.max_tilt_rad
+        if self.min_base_height_m is None:
+            self.min_base_height_m = robot.min_base_height_m
+        if self.rewards.base_height_target_m is None:
+            self.rewards = dataclasses.replace(
+                self.rewards, base_height_target_m=robot.standing_height_m
+            )
 
     @property
     def step_dt_s(self) -> float:

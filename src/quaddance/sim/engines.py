@@ -59,7 +59,7 @@ class CpuEngine:
         self.device = torch.device("cpu")
         base = build_model(scene, visual=False)
         self.model = base
-        self.layout = SensorLayout.from_model(base)
+        self.layout = SensorLayout.from_model(base, scene.robot)
         rows = nominal_dynamics(scene) if variants is None else variants
         self.variants = np.asarray(rows, dtype=np.float64)
         self._variant_models = []

@@ -1,4 +1,4 @@
-"""Go1 leg kinematics from what the robot itself measures: joint encoders and the IMU.
+"""Leg kinematics from what the robot itself measures: joint encoders and the IMU.
 
 A real Go1 has no sensor for "foot height above the floor". It can compute the feet's
 positions in the trunk frame from its joint encoders (forward kinematics), turn them
@@ -16,14 +16,14 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from quaddance.sim import go1
+from quaddance.robots import RobotCfg
 from quaddance.sim.scene import SceneCfg, build_model
 
 
 @dataclass(frozen=True)
 class LegGeometry:
     """Fixed offsets along each leg's chain, trunk frame, m; rows in task foot order
-    (FL, FR, RL, RR). Joints: hip about x, thigh and calf about y (go1.xml)."""
+    (`RobotCfg.feet`). Joints: hip about x, thigh and calf about y (as in go1.xml)."""
 
     hip_pos_b: np.ndarray  # (4, 3) hip joint in the trunk frame
     thigh_offset: np.ndarray  # (4, 3) thigh joint relative to the hip body
@@ -49,22 +49,23 @@ class LegGeometry:
 
 
 @functools.lru_cache(maxsize=4)
-def leg_geometry(scene: SceneCfg = SceneCfg()) -> LegGeometry:
-    """Read the leg offsets from the scene's MJCF (mjlab's go1.xml), so there is one source."""
-    model = build_model(scene)
+def leg_geometry(robot: RobotCfg) -> LegGeometry:
+    """Read the leg offsets from the robot's MJCF, so there is one source."""
+    model = build_model(SceneCfg(robot=robot))
     rows: dict[str, list[np.ndarray]] = {k: [] for k in ("hip", "thigh", "calf", "foot")}
     cols = []
-    for foot in go1.FEET:
-        for part in ("hip", "thigh", "calf"):
-            body = model.body(f"{foot}_{part}")
+    for foot, site in zip(robot.feet, robot.foot_sites, strict=True):
+        joint_cols = robot.leg_joint_cols(foot)
+        for part, col in zip(("hip", "thigh", "calf"), joint_cols, strict=True):
+            # The body each joint moves: the leg's hip, thigh and calf links.
+            body = model.body(model.jnt_bodyid[model.joint(robot.joint_names[col]).id])
             # The chain is plain translations + single-axis joints; a rotated body frame
             # would need its quaternion in the chain, which this model does not use.
             if not np.allclose(body.quat, [1.0, 0.0, 0.0, 0.0]):
-                raise ValueError(f"{foot}_{part}: rotated body frames are not supported")
+                raise ValueError(f"{body.name}: rotated body frames are not supported")
             rows[part].append(np.array(body.pos, dtype=np.float64))
-        rows["foot"].append(np.array(model.site(foot).pos, dtype=np.float64))
-        leg = go1.MODEL_LEGS.index(foot)
-        cols.append([3 * leg, 3 * leg + 1, 3 * leg + 2])
+        rows["foot"].append(np.array(model.site(site).pos, dtype=np.float64))
+        cols.append(list(joint_cols))
     return LegGeometry(
         hip_pos_b=np.stack(rows["hip"]),
         thigh_offset=np.stack(rows["thigh"]),

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 
 import torch
 
-from quaddance.sim import go1
+from quaddance.robots import GO1
 from quaddance.sim.config import DanceTaskCfg, DomainRandCfg
 from quaddance.sim.kinematics import estimate_foot_height_m, leg_geometry
 from quaddance.sim.state import RobotState, quat_rotate_inverse, wrap_angle_rad, yaw_from_quat
@@ -115,12 +115,12 @@ PROPRIO_TERMS: tuple[ObsTerm, ...] = (
     ObsTerm("base_ang_vel_b", 3, "imu", lambda m, a, ob: m.gyro_rad_s),
     ObsTerm(
         "joint_pos_rel",
-        go1.NUM_JOINTS,
+        GO1.num_joints,
         "joint_encoders",
         lambda m, a, ob: m.joint_pos_rad - ob.nominal_joint_pos,
     ),
-    ObsTerm("joint_vel", go1.NUM_JOINTS, "joint_encoders", lambda m, a, ob: m.joint_vel_rad_s),
-    ObsTerm("last_action", go1.NUM_JOINTS, "previous_action", lambda m, a, ob: a),
+    ObsTerm("joint_vel", GO1.num_joints, "joint_encoders", lambda m, a, ob: m.joint_vel_rad_s),
+    ObsTerm("last_action", GO1.num_joints, "previous_action", lambda m, a, ob: a),
     ObsTerm("foot_height_m", 4, "kinematics", _foot_height),
 )
 PROPRIO_DIM = sum(t.size for t in PROPRIO_TERMS)
@@ -141,8 +141,10 @@ class ActorObservation:
         self.whole_body = cfg.whole_body
         self.heading = cfg.whole_body and cfg.obs.heading
         self._heading_rad = torch.zeros(num_envs, device=self.device)
-        self.nominal_joint_pos = torch.tensor(go1.nominal_joint_pos(), device=self.device)
-        self.geom = leg_geometry(cfg.scene)
+        self.nominal_joint_pos = torch.tensor(
+            cfg.scene.robot.nominal_joint_pos_rad, device=self.device
+        )
+        self.geom = leg_geometry(cfg.scene.robot)
         self.history = torch.zeros(num_envs, self.history_len, PROPRIO_DIM, device=self.device)
 
     def proprio(self, meas: Measurement, last_action: torch.Tensor) -> torch.Tensor:

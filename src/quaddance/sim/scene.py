@@ -1,51 +1,54 @@
-"""The dance scene: mjlab's Go1 on a flat floor, with PD position actuators and sensors.
+"""The dance scene: the robot (`SceneCfg.robot`, mjlab's Go1 by default) on a flat floor,
+with PD position actuators and sensors.
 
-One MJCF for every engine (native MuJoCo, MuJoCo Warp) and for rendering, built from mjlab's
-shipped `go1.xml` and cached per setting.
+One MJCF for every engine (native MuJoCo, MuJoCo Warp) and for rendering, built from the
+robot's model file and cached per setting.
 """
 
 from __future__ import annotations
 
 import copy
 import functools
-import importlib.util
 from dataclasses import dataclass
-from pathlib import Path
 
 import mujoco
 import numpy as np
 
-from quaddance.sim import go1
+from quaddance.robots import GO1, RobotCfg
 
 
 @dataclass(frozen=True)
 class SceneCfg:
-    """Physics settings of the scene."""
+    """The robot and the physics settings of the scene.
 
+    ``kp`` and ``kd`` (the position actuators' gains) default to the robot's; they are filled
+    in at construction, so a saved task (the policy JSON's ``task``) records the numbers
+    (and `dataclasses.replace` with another robot keeps them: construct a new config).
+    """
+
+    robot: RobotCfg = GO1
     timestep_s: float = 0.005  # released code: sim dt 0.005 s
-    kp: float = 20.0  # released code (the paper's text says kp 20)
-    kd: float = 0.5  # released code (the paper's text says 5)
+    kp: float | None = None  # None: `RobotCfg.kp`
+    kd: float | None = None  # None: `RobotCfg.kd`
     foot_friction: float = 1.0
     solver_iterations: int = 8
     ls_iterations: int = 8
 
-
-def _go1_xml_path() -> str:
-    # Located without importing mjlab, whose package import pulls in warp (seconds).
-    spec = importlib.util.find_spec("mjlab")
-    if spec is None or not spec.submodule_search_locations:
-        raise ImportError("mjlab is not installed; it ships the Go1 model (pip install mjlab)")
-    root = Path(next(iter(spec.submodule_search_locations)))
-    return str(root / "asset_zoo" / "robots" / "unitree_go1" / "xmls" / "go1.xml")
+    def __post_init__(self) -> None:
+        if self.kp is None:
+            object.__setattr__(self, "kp", self.robot.kp)
+        if self.kd is None:
+            object.__setattr__(self, "kd", self.robot.kd)
 
 
 def build_spec(cfg: SceneCfg = SceneCfg(), visual: bool = True) -> mujoco.MjSpec:
-    """Go1 + floor + actuators + sensors as an editable spec.
+    """Robot + floor + actuators + sensors as an editable spec.
 
     ``visual=False`` drops the visual meshes (39 MB of model buffer): the dynamics are the
     same because every body has an explicit inertial and visual geoms never collide.
     """
-    spec = mujoco.MjSpec.from_file(_go1_xml_path())
+    robot = cfg.robot
+    spec = mujoco.MjSpec.from_file(robot.model_file())
     # Our own sensors replace the model's IMU sensors (one fewer thing to compute per step).
     for sensor in list(spec.sensors):
         spec.delete(sensor)
@@ -108,11 +111,10 @@ def build_spec(cfg: SceneCfg = SceneCfg(), visual: bool = True) -> mujoco.MjSpec
             geom.friction = [cfg.foot_friction, 0.005, 0.0001]
             geom.priority = 1
 
-    for name in go1.JOINT_NAMES:
-        joint = spec.joint(name)
-        is_knee = name.endswith("calf_joint")
-        joint.armature = go1.KNEE_ARMATURE if is_knee else go1.HIP_ARMATURE
-        effort = go1.effort_limit_nm(name)
+    for name, armature, effort in zip(
+        robot.joint_names, robot.armature, robot.effort_limit_nm, strict=True
+    ):
+        spec.joint(name).armature = armature
         act = spec.add_actuator(name=name.removesuffix("_joint"), target=name)
         act.trntype = mujoco.mjtTrn.mjTRN_JOINT
         act.set_to_position(kp=cfg.kp, kv=cfg.kd)
@@ -121,20 +123,21 @@ def build_spec(cfg: SceneCfg = SceneCfg(), visual: bool = True) -> mujoco.MjSpec
 
     # Sensors, read by every engine in this order (see quaddance.sim.state.SensorLayout).
     site, actuator = mujoco.mjtObj.mjOBJ_SITE, mujoco.mjtObj.mjOBJ_ACTUATOR
-    sensors = [(f"{f}_pos", mujoco.mjtSensor.mjSENS_FRAMEPOS, site, f) for f in go1.FEET]
-    sensors += [(f"{f}_vel", mujoco.mjtSensor.mjSENS_FRAMELINVEL, site, f) for f in go1.FEET]
+    feet = list(zip(robot.feet, robot.foot_sites, strict=True))
+    sensors = [(f"{f}_pos", mujoco.mjtSensor.mjSENS_FRAMEPOS, site, s) for f, s in feet]
+    sensors += [(f"{f}_vel", mujoco.mjtSensor.mjSENS_FRAMELINVEL, site, s) for f, s in feet]
     sensors += [
         (f"{j}_torque", mujoco.mjtSensor.mjSENS_ACTUATORFRC, actuator, j.removesuffix("_joint"))
-        for j in go1.JOINT_NAMES
+        for j in robot.joint_names
     ]
     for name, sensor_type, objtype, objname in sensors:
         spec.add_sensor(name=name, type=sensor_type, objtype=objtype, objname=objname)
     # Contacts with the floor of the trunk (termination) and of the thighs and the upper calf
     # capsules near the knees (collision penalty); the calf bodies also hold the feet.
-    contacts = [("trunk", mujoco.mjtObj.mjOBJ_BODY, "trunk")]
-    for leg in go1.MODEL_LEGS:
-        contacts.append((f"{leg}_thigh", mujoco.mjtObj.mjOBJ_BODY, f"{leg}_thigh"))
-        contacts.append((f"{leg}_knee", mujoco.mjtObj.mjOBJ_GEOM, f"{leg}_calf_collision1"))
+    contacts = [("trunk", mujoco.mjtObj.mjOBJ_BODY, robot.trunk_body)]
+    for leg, thigh, knee in zip(robot.legs, robot.thigh_bodies, robot.knee_geoms, strict=True):
+        contacts.append((f"{leg}_thigh", mujoco.mjtObj.mjOBJ_BODY, thigh))
+        contacts.append((f"{leg}_knee", mujoco.mjtObj.mjOBJ_GEOM, knee))
     for name, objtype, objname in contacts:
         spec.add_sensor(
             name=f"{name}_contact",
@@ -146,11 +149,11 @@ def build_spec(cfg: SceneCfg = SceneCfg(), visual: bool = True) -> mujoco.MjSpec
             intprm=[1, 0, 1],  # data="found", no reduction, num=1
         )
     # Nominal standing pose as the "home" keyframe.
-    qpos = np.zeros(7 + go1.NUM_JOINTS)
-    qpos[2] = go1.INIT_BASE_HEIGHT_M
+    qpos = np.zeros(7 + robot.num_joints)
+    qpos[2] = robot.init_base_height_m
     qpos[3] = 1.0
-    qpos[7:] = go1.nominal_joint_pos()
-    spec.add_key(name="home", qpos=qpos.tolist(), ctrl=go1.nominal_joint_pos())
+    qpos[7:] = robot.nominal_joint_pos_rad
+    spec.add_key(name="home", qpos=qpos.tolist(), ctrl=list(robot.nominal_joint_pos_rad))
     return spec
 
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import mujoco
 import torch
 
-from quaddance.sim import go1
+from quaddance.robots import RobotCfg
 
 
 @dataclass(frozen=True)
@@ -24,20 +24,24 @@ class SensorLayout:
     joint_torque: tuple[int, ...]  # 12, model joint order
     base_contact: int  # trunk touching the floor (number of contacts)
     leg_contact: tuple[int, ...]  # thighs and calves touching the floor (8)
+    foot_radius_m: float  # the foot sensors read the sphere's centre; its bottom is this lower
 
     @classmethod
-    def from_model(cls, model: mujoco.MjModel) -> SensorLayout:
+    def from_model(cls, model: mujoco.MjModel, robot: RobotCfg) -> SensorLayout:
+        """The layout of a scene built for ``robot`` (`quaddance.sim.scene.build_spec`)."""
+
         def adr(name: str, dim: int) -> list[int]:
             start = int(model.sensor(name).adr[0])
             return list(range(start, start + dim))
 
-        legs = [f"{leg}_{p}" for leg in go1.MODEL_LEGS for p in ("thigh", "knee")]
+        legs = [f"{leg}_{p}" for leg in robot.legs for p in ("thigh", "knee")]
         return cls(
-            foot_pos=tuple(i for f in go1.FEET for i in adr(f"{f}_pos", 3)),
-            foot_vel=tuple(i for f in go1.FEET for i in adr(f"{f}_vel", 3)),
-            joint_torque=tuple(i for j in go1.JOINT_NAMES for i in adr(f"{j}_torque", 1)),
+            foot_pos=tuple(i for f in robot.feet for i in adr(f"{f}_pos", 3)),
+            foot_vel=tuple(i for f in robot.feet for i in adr(f"{f}_vel", 3)),
+            joint_torque=tuple(i for j in robot.joint_names for i in adr(f"{j}_torque", 1)),
             base_contact=adr("trunk_contact", 1)[0],
             leg_contact=tuple(adr(f"{b}_contact", 1)[0] for b in legs),
+            foot_radius_m=robot.foot_radius_m,
         )
 
 
@@ -56,11 +60,12 @@ class RobotState:
     foot_vel_w: torch.Tensor  # (N, 4, 3) m/s
     base_contact: torch.Tensor  # (N,) bool
     leg_contacts: torch.Tensor  # (N,) number of thighs/calves touching the floor
+    foot_radius_m: float
 
     @functools.cached_property
     def foot_height_m(self) -> torch.Tensor:
         """(N, 4) height of each foot's bottom above the floor: THE foot height of quaddance."""
-        return self.foot_pos_w[..., 2] - go1.FOOT_RADIUS_M
+        return self.foot_pos_w[..., 2] - self.foot_radius_m
 
     @functools.cached_property
     def projected_gravity_b(self) -> torch.Tensor:
@@ -131,6 +136,7 @@ def state_from_arrays(
         foot_vel_w=cols(layout.foot_vel).reshape(n, 4, 3),
         base_contact=sensordata[:, layout.base_contact] > 0.5,
         leg_contacts=(cols(layout.leg_contact) > 0.5).sum(dim=1),
+        foot_radius_m=layout.foot_radius_m,
     )
 
 

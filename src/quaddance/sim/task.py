@@ -12,7 +12,7 @@ from typing import Protocol
 import numpy as np
 import torch
 
-from quaddance.sim import go1, observations, rewards, terminations
+from quaddance.sim import observations, rewards, terminations
 from quaddance.sim.body import BODY_DIM, BodyFeedforward
 from quaddance.sim.config import DanceTaskCfg
 from quaddance.sim.engine import Engine, nominal_dynamics
@@ -93,7 +93,7 @@ class DanceEnv:
         # Playback needs the same observations, dynamics and terminations but no rewards.
         self.compute_rewards = compute_rewards
         self.num_envs = cfg.num_envs
-        self.num_actions = go1.NUM_JOINTS
+        self.num_actions = cfg.scene.robot.num_joints
         self.max_episode_length = cfg.max_episode_steps
         self._rng = np.random.default_rng(seed)
         self._gen = torch.Generator().manual_seed(seed)
@@ -129,24 +129,24 @@ class DanceEnv:
         self.preview_steps = self.actor_obs.preview_steps
 
         model = self.engine.model
-        self.nominal_joint_pos = torch.tensor(go1.nominal_joint_pos(), device=dev)
+        self.nominal_joint_pos = torch.tensor(cfg.scene.robot.nominal_joint_pos_rad, device=dev)
         self.home_qpos = torch.tensor(model.key("home").qpos, dtype=torch.float32, device=dev)
-        scale = torch.full((go1.NUM_JOINTS,), cfg.action_scale, device=dev)
+        scale = torch.full((self.num_actions,), cfg.action_scale, device=dev)
         scale[0::3] *= cfg.hip_scale_factor  # hips are every third joint in model order
         self.action_scale = scale
         # Playback passes the table from the policy's JSON (the same numbers, no 2 s rebuild).
         self.feedforward = (
-            FrontLiftFeedforward(cfg.scene, dev, feedforward_table)
+            FrontLiftFeedforward(cfg.scene.robot, dev, feedforward_table)
             if cfg.front_feedforward
             else None
         )
-        self.body_feedforward = BodyFeedforward(cfg.scene, dev) if cfg.whole_body else None
+        self.body_feedforward = BodyFeedforward(cfg.scene.robot, dev) if cfg.whole_body else None
         lo = torch.tensor(model.jnt_range[1:, 0], dtype=torch.float32, device=dev)
         hi = torch.tensor(model.jnt_range[1:, 1], dtype=torch.float32, device=dev)
         mid, half = (lo + hi) / 2, (hi - lo) / 2 * 0.9
         self.soft_joint_limits = (mid - half, mid + half)
 
-        n, j = self.num_envs, go1.NUM_JOINTS
+        n, j = self.num_envs, self.num_actions
         z = lambda *shape: torch.zeros(*shape, device=dev)  # noqa: E731
         self.episode_length_buf = torch.zeros(n, dtype=torch.long, device=dev)
         self.bank_idx = torch.zeros(n, dtype=torch.long, device=dev)
@@ -238,7 +238,7 @@ class DanceEnv:
         j = torch.arange(d, device=self.device)
         back = torch.div(self.action_lag[:, None] - j[None, :] + d - 1, d, rounding_mode="floor")
         back = back.clamp(0, self._target_hist.shape[1] - 1)
-        return torch.gather(self._target_hist, 1, back[..., None].expand(-1, -1, go1.NUM_JOINTS))
+        return torch.gather(self._target_hist, 1, back[..., None].expand(-1, -1, self.num_actions))
 
     def measure(self) -> observations.Measurement:
         """What the robots' sensors read now (with sensor noise when randomising)."""
@@ -323,9 +323,9 @@ class DanceEnv:
         qpos = self.home_qpos.repeat(n, 1)
         qvel = torch.zeros(n, self.engine.nv, device=dev)
         if dr.enabled:
-            qpos[:, 7:] += (rand(n, go1.NUM_JOINTS) * 2 - 1) * dr.init_joint_noise_rad
+            qpos[:, 7:] += (rand(n, self.num_actions) * 2 - 1) * dr.init_joint_noise_rad
             variant = torch.randint(len(self._variants), (n,), generator=self._gen).to(dev)
-            self.joint_offset[ids] = (rand(n, go1.NUM_JOINTS) * 2 - 1) * dr.joint_offset_rad
+            self.joint_offset[ids] = (rand(n, self.num_actions) * 2 - 1) * dr.joint_offset_rad
             self.action_lag[ids] = torch.randint(
                 dr.max_action_lag_substeps + 1, (n,), generator=self._gen
             ).to(dev)

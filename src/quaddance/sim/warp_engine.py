@@ -49,7 +49,7 @@ class WarpEngine:
         self.num_envs = num_envs
         mjm = build_model(scene, visual=False)
         self.model = mjm
-        self.layout = SensorLayout.from_model(mjm)
+        self.layout = SensorLayout.from_model(mjm, scene.robot)
         self.nq, self.nv, self.nu = mjm.nq, mjm.nv, mjm.nu
         mjd = mujoco.MjData(mjm)
         mujoco.mj_resetDataKeyframe(mjm, mjd, mjm.key("home").id)

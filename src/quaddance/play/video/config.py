@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from quaddance.errors import QuaddanceError
+from quaddance.robots import GO1, RobotCfg
 
 VIDEO_FPS = 25.0
 """Frame rate of the videos, Hz. 25 divides the 50 Hz policy rate (each frame is a simulated
@@ -19,6 +20,8 @@ EGL_PACKAGES = "libegl1 libegl-mesa0 libgl1-mesa-dri"
 class RenderCfg:
     """Look, camera and encoder settings of the video."""
 
+    #: The robot drawn: its scene when no model is given, its front feet for the markers.
+    robot: RobotCfg = GO1
     #: Named model camera (e.g. "tracking") instead of the smoothed follow camera.
     camera: str | None = None
     #: Follow camera: distance to the look-at point, m. Frames the 0.65 m Go1 with room for

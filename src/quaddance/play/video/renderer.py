@@ -290,7 +290,7 @@ def render_video(
         raise QuaddanceError(f"audio_offset_s must be >= 0, got {audio_offset_s}")
     if audio_path is not None:
         check_audio(Path(audio_path))
-    base_model = load_model(model)
+    base_model = load_model(model, (cfg or RenderCfg()).robot)
     check_poses(base_model.nq, qpos_s, sim_fps, target_heights_m)
     with VideoRenderer(base_model, width, height, workers, cfg) as renderer:
         return renderer.render(

@@ -17,24 +17,25 @@ import numpy as np
 
 from quaddance.errors import QuaddanceError
 from quaddance.play.video.config import RenderCfg
-from quaddance.sim import go1
+from quaddance.robots import RobotCfg
 
 ModelSource = mujoco.MjModel | Callable[[], mujoco.MjModel] | None
 """A model to render, or a zero-argument function that builds one; None means the dance scene
-with its visual meshes (`quaddance.sim.scene.build_model(visual=True)`)."""
+of `RenderCfg.robot` with its visual meshes (`quaddance.sim.scene.build_model(visual=True)`)."""
 
 
-def default_model() -> mujoco.MjModel:
-    """The dance scene with its visual meshes."""
-    from quaddance.sim.scene import build_model
+def default_model(robot: RobotCfg) -> mujoco.MjModel:
+    """The dance scene of ``robot`` with its visual meshes."""
+    from quaddance.sim.scene import SceneCfg, build_model
 
-    return build_model(visual=True)
+    return build_model(SceneCfg(robot=robot), visual=True)
 
 
-def load_model(model: ModelSource) -> mujoco.MjModel:
-    """The model that ``model`` names (built now if it is a function or None)."""
+def load_model(model: ModelSource, robot: RobotCfg) -> mujoco.MjModel:
+    """The model that ``model`` names (built now if it is a function, or ``robot``'s scene if
+    it is None)."""
     if model is None:
-        return default_model()
+        return default_model(robot)
     if isinstance(model, mujoco.MjModel):
         return model
     if callable(model):
@@ -146,7 +147,8 @@ class FrameRenderer:
             cam.elevation = cfg.elevation_deg
             self.camera = cam
         self.front_sites = [
-            mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, name) for name in go1.FEET[:2]
+            mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, name)
+            for name in cfg.robot.foot_sites[:2]
         ]
 
     def render(
@@ -180,7 +182,7 @@ class FrameRenderer:
                 continue
             pos = self.data.site_xpos[site].copy()
             # The foot site is the centre of the foot sphere, whose bottom is the foot height.
-            pos[2] = target_heights_m[foot] + go1.FOOT_RADIUS_M
+            pos[2] = target_heights_m[foot] + self.cfg.robot.foot_radius_m
             mujoco.mjv_initGeom(
                 scene.geoms[scene.ngeom],
                 mujoco.mjtGeom.mjGEOM_SPHERE,

@@ -36,7 +36,7 @@ def write_frames_png(
     """
     cfg = cfg or RenderCfg()
     check_size(width, height, 1.0)
-    base_model = load_model(model)
+    base_model = load_model(model, cfg.robot)
     layout = QposLayout.of(base_model)
     qpos = check_poses(layout.nq, qpos_s, sim_fps, target_heights_m)
     times = np.asarray(times_s, dtype=float).reshape(-1)

@@ -208,7 +208,7 @@ def _worker(spec: _WorkerSpec, jobs: Any, out: Any, startup: Any) -> None:
             elif spec.built_model_path is not None and spec.built_model_path.is_file():
                 model = mujoco.MjModel.from_binary_path(str(spec.built_model_path))
             else:
-                model = default_model()
+                model = default_model(spec.cfg.robot)
                 if spec.built_model_path is not None and spec.n_workers > 1:
                     with atomic_path(spec.built_model_path) as tmp:
                         mujoco.mj_saveModel(model, str(tmp), None)
@@ -306,7 +306,7 @@ class WorkerPool:
         self.layout_known = threading.Event()
         model_path = None
         if model is not None:
-            base = load_model(model)
+            base = load_model(model, cfg.robot)
             self.layout = QposLayout.of(base)
             self.layout_known.set()
             model_path = self.tmp_dir / "model.mjb"

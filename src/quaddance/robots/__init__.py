@@ -1,0 +1,28 @@
+"""Robot configs: every fact about a robot that quaddance uses, one module per robot.
+
+A robot is one frozen `RobotCfg` (`quaddance.robots.go1.GO1` is the first). The scene, the
+kinematics, the feed-forwards, the body IK, the terminations, the feasible targets, the safety
+layer and the backends all read it; nothing else holds a robot number. A new robot is a new
+module here with its `RobotCfg`, added to `ROBOTS`.
+
+Torch-free and cheap to import (numpy only): a policy reader or a robot runner loads it.
+"""
+
+from __future__ import annotations
+
+from quaddance.errors import QuaddanceError
+from quaddance.robots.config import BodyLimits, FrontLiftCfg, RobotCfg, SafetyLimits
+from quaddance.robots.go1 import GO1
+
+__all__ = ["GO1", "ROBOTS", "BodyLimits", "FrontLiftCfg", "RobotCfg", "SafetyLimits", "get_robot"]
+
+ROBOTS: dict[str, RobotCfg] = {GO1.name: GO1}
+"""Every robot by name."""
+
+
+def get_robot(name: str) -> RobotCfg:
+    """The robot called ``name`` (`ROBOTS`), or one error listing those there are."""
+    try:
+        return ROBOTS[name]
+    except KeyError:
+        raise QuaddanceError(f"unknown robot {name!r}; known: {', '.join(ROBOTS)}") from None
