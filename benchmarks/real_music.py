@@ -1,0 +1,796 @@
+"""Real music with exact beats, made by people elsewhere, kept apart from tuning.
+
+Two kinds of song, each from a Debian package (``benchmarks/real_music/LICENCES.md``):
+
+- ``recording``: the Frets on Fire song packs (``fretsonfire-songs-muldjord``, CC BY-SA 3.0;
+  ``fretsonfire-songs-sectoid``, MIT licence): metal and rock recorded by the bands Muldjord
+  and Sectoid, each with a chart (``notes.mid``) played in time with it. The recordings were
+  made to a click in a sequencer, so the chart's tempo map is the recording's beat grid; only
+  the grid's phase against the audio (the chart's sync, tens of ms) is measured here
+  (`grid_offset_s`). Each song's band track (``song.ogg``) and lead guitar (``guitar.ogg``)
+  are mixed to one mono track.
+- ``midi_render``: MIDI songs of OpenTTD's music set (``openttd-openmsx``, GPL-2), composed
+  by people for the game, rendered here with fluidsynth and a General MIDI soundfont: they
+  bring what the recordings lack (3/4 and 6/4, tempo ramps and changes, 64-90 BPM), with
+  beats exact by construction, but they are sequenced and so easier than a band.
+
+Each song is one mono Ogg Vorbis file under ``audio/``, its beats and downbeats text under
+``beats/`` (one time in seconds a line), and ``manifest.json`` lists them.
+
+Commands (run from the repository root):
+
+- ``python -m benchmarks.real_music build`` downloads the two Debian packages with
+  ``apt-get download`` and writes the audio, beat files and manifest again.
+- ``python -m benchmarks.real_music check`` measures how well the beats sit on the audio's
+  onsets (`check_song`) and writes ``benchmarks/results/real_music_check.json``.
+- ``python -m benchmarks.real_music bench`` scores the offline analyser, the online tracker and
+  librosa's ``beat_track`` (and madmom's DBN tracker with ``--madmom-python``) on both splits
+  and writes ``benchmarks/results/beats_real.json``.
+
+The split (``SONGS``' ``split``) was fixed before any tracker was run on these songs: the
+``tuning`` part may be used to choose settings, the ``heldout`` part only to report them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent / "real_music"
+"""The set's folder: ``manifest.json``, ``audio/``, ``beats/``, ``LICENCES.md``."""
+MANIFEST_NAME = "manifest.json"
+SPLITS = ("tuning", "heldout")
+AUDIO_SR_HZ = 44100
+"""Rate of the committed audio, Hz (the recordings' own; madmom's models expect it)."""
+OGG_QUALITY = 0.5
+"""libsndfile's Vorbis compression level for the committed audio (about 80 kbit/s mono)."""
+SILENCE_DB = -40.0
+"""Beats are kept from where the music is first louder than this, dB below the song's peak
+(50 ms RMS frames), to where it last is: there is nothing to hear before and after."""
+KINDS = ("recording", "midi_render")
+FOF_DIR = "usr/share/games/fretsonfire/data/songs"
+OPENMSX_DIR = "usr/share/games/openttd/baseset/openmsx"
+
+LICENCES = {
+    "CC-BY-SA-3.0": "https://creativecommons.org/licenses/by-sa/3.0/",
+    "MIT": "https://opensource.org/license/mit",
+    "GPL-2.0": "https://www.gnu.org/licenses/old-licenses/gpl-2.0.html",
+}
+
+
+@dataclass(frozen=True)
+class SongSource:
+    """Where one song comes from, and its split (fixed before any tracker was run on it)."""
+
+    name: str
+    package: str  # Debian package
+    path: str  # the song's folder (recording) or MIDI file (midi_render) in the package
+    title: str
+    artist: str
+    licence: str  # a key of LICENCES
+    split: str  # "tuning" or "heldout"
+    notes: str  # what is known of the song's rhythm from its chart or score
+
+    @property
+    def kind(self) -> str:
+        return "midi_render" if self.path.endswith(".mid") else "recording"
+
+
+_MULDJORD = "fretsonfire-songs-muldjord"
+_SECTOID = "fretsonfire-songs-sectoid"
+_OPENMSX = "openttd-openmsx"
+_REDFARN = "Jim Redfarn (OpenMSX)"
+_EL_SENATOR = "Muldjord (El Senator)"
+_VIOLA = "Sectoid (Carlos Viola Iborra)"
+SONGS = (
+    SongSource(
+        "chaos_god", _MULDJORD, f"{FOF_DIR}/muldjord/chaos_god", "Chaos God", _EL_SENATOR,
+        "CC-BY-SA-3.0", "tuning", "metal, 170 BPM",
+    ),
+    SongSource(
+        "internal_degeneration", _MULDJORD, f"{FOF_DIR}/muldjord/internal_degeneration",
+        "Internal Degeneration", _EL_SENATOR, "CC-BY-SA-3.0", "tuning",
+        "metal, 190 BPM charted (95 BPM half time is as plausible a dance tempo)",
+    ),
+    SongSource(
+        "escape_from_chaosland", _SECTOID, f"{FOF_DIR}/sectoid/Escape from chaosland",
+        "Escape from chaosland", _VIOLA, "MIT", "tuning",
+        "rock, 135 BPM",
+    ),
+    SongSource(
+        "feelings", _SECTOID, f"{FOF_DIR}/sectoid/Feelings", "Feelings", _VIOLA,
+        "MIT", "heldout", "ballad rock, 95 BPM, the slowest song",
+    ),
+    SongSource(
+        "war_of_freedom", _SECTOID, f"{FOF_DIR}/sectoid/War of freedom", "War of freedom",
+        _VIOLA, "MIT", "heldout", "rock, 140 BPM",
+    ),
+    SongSource(
+        "metal_madness", _SECTOID, f"{FOF_DIR}/sectoid/Metal madness", "Metal madness",
+        _VIOLA, "MIT", "heldout",
+        "metal, 150 BPM, riffs accented off the beat",
+    ),
+    SongSource(
+        "armygeddon", _MULDJORD, f"{FOF_DIR}/muldjord/armygeddon", "Armygeddon", _EL_SENATOR,
+        "CC-BY-SA-3.0", "heldout", "metal, 170 BPM",
+    ),
+    SongSource(
+        "mutilated_mime", _MULDJORD, f"{FOF_DIR}/muldjord/mutilated_mime", "Mutilated Mime",
+        _EL_SENATOR, "CC-BY-SA-3.0", "heldout", "metal, 180 BPM",
+    ),
+    SongSource(
+        "midnight_snow_run", _OPENMSX, f"{OPENMSX_DIR}/midnight_snow_run.mid",
+        "Midnight Snow Run", "Tistou Blomberg (OpenMSX)", "GPL-2.0", "tuning",
+        "4/4, a tempo ramp from 120 BPM",
+    ),
+    SongSource(
+        "careless_love", _OPENMSX, f"{OPENMSX_DIR}/careless_perc_redfarn.mid", "Careless Love",
+        _REDFARN, "GPL-2.0", "tuning", "4/4, 64 BPM: slow, 128 BPM is as plausible",
+    ),
+    SongSource(
+        "keep_on_rolling", _OPENMSX, f"{OPENMSX_DIR}/keep_on_rolling.mid", "Keep on Rolling",
+        "-lucas- (OpenMSX)", "GPL-2.0", "tuning", "4/4, 104 BPM",
+    ),
+    SongSource(
+        "the_hobo", _OPENMSX, f"{OPENMSX_DIR}/the_hobo_redfarn.mid", "The Hobo", _REDFARN,
+        "GPL-2.0", "tuning", "6/4, 126 BPM",
+    ),
+    SongSource(
+        "boogie_marabi", _OPENMSX, f"{OPENMSX_DIR}/boogi_marabi_redfarn.mid", "Boogie Marabi",
+        _REDFARN, "GPL-2.0", "heldout", "3/4, 153 BPM",
+    ),
+    SongSource(
+        "be_sharp", _OPENMSX, f"{OPENMSX_DIR}/be_sharp_bw_redfarn.mid", "Be Sharp", _REDFARN,
+        "GPL-2.0", "heldout", "4/4, 109 BPM, a ritardando at the end",
+    ),
+    SongSource(
+        "train_filled_with_cash", _OPENMSX, f"{OPENMSX_DIR}/train_filled_with_cash.mid",
+        "Train filled with cash", "imuh3 (OpenMSX)", "GPL-2.0", "heldout", "4/4, 90 BPM",
+    ),
+    SongSource(
+        "chugga_chugga", _OPENMSX, f"{OPENMSX_DIR}/chuggachugga.mid",
+        "Chugga Chugga Cha-ching", "imuh3 (OpenMSX)", "GPL-2.0", "heldout",
+        "4/4, 180 BPM, slowing to 69 BPM at the end",
+    ),
+    SongSource(
+        "ttsong_iv", _OPENMSX, f"{OPENMSX_DIR}/ttsong_iv_imuh3.mid", "TT Song IV",
+        "imuh3 (OpenMSX)", "GPL-2.0", "heldout", "4/4, 80 BPM",
+    ),
+    SongSource(
+        "mosey_along", _OPENMSX, f"{OPENMSX_DIR}/mosey_along_redfarn.mid", "Mosey Along",
+        _REDFARN, "GPL-2.0", "heldout", "4/4, 140 BPM",
+    ),
+)  # fmt: skip
+SPLIT_REASON = (
+    "About 40 % for tuning, 60 % held out, chosen by tempo, meter and kind before any tracker "
+    "was run on a song. Recordings: 3 of 8 (10 of 27 minutes) for tuning; each part has both "
+    "bands, a song near 135-140 BPM and songs at 170 BPM and above; the held-out part keeps "
+    "the slow ballad (95 BPM) and the off-beat riffs (Metal madness), where a tracker most "
+    "often picks the wrong level or phase, so that they test rather than steer a change. MIDI "
+    "renders: 4 of 10 for tuning (a tempo ramp, 64 BPM, 104 BPM, 6/4); held out: 3/4, a "
+    "ritardando, a tempo change, 80, 90 and 140 BPM."
+)
+
+
+@dataclass
+class RealSong:
+    """One song of the set, as the loader returns it."""
+
+    name: str
+    title: str
+    artist: str
+    split: str
+    kind: str  # "recording" or "midi_render"
+    audio_path: Path
+    beats_s: np.ndarray  # (n,) beat times, s, strictly increasing
+    downbeats_s: np.ndarray  # (n_bars,) the chart's bar lines, s
+    tempo_bpm: tuple[float, float]  # (min, max) of the chart's tempo map
+    meter: str
+    licence: str
+    duration_s: float
+
+
+# --- reading the set ------------------------------------------------------------------------
+
+
+def _read_times(path: Path) -> np.ndarray:
+    return np.loadtxt(path, dtype=float, ndmin=1)
+
+
+def load_manifest(root: Path = ROOT) -> dict[str, Any]:
+    """The manifest of the set under ``root`` (``build`` writes it)."""
+    path = root / MANIFEST_NAME
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"no real-music manifest at {path}: run `python -m {__name__} build`"
+        )
+    return json.loads(path.read_text())
+
+
+def load_songs(root: Path = ROOT, splits: tuple[str, ...] = SPLITS) -> list[RealSong]:
+    """The songs of ``splits``, their audio, licence and beat files checked to exist.
+
+    Raises:
+        FileNotFoundError: a file the manifest lists is missing.
+        ValueError: a song has an unknown split or licence, or beats that are not strictly
+            increasing or not inside its audio.
+    """
+    unknown = set(splits) - set(SPLITS)
+    if unknown:
+        raise ValueError(f"unknown split(s) {sorted(unknown)}; choose from {SPLITS}")
+    manifest = load_manifest(root)
+    songs = []
+    for entry in manifest["songs"]:
+        if entry["split"] not in SPLITS:
+            raise ValueError(f"{entry['name']}: split {entry['split']!r} is not one of {SPLITS}")
+        if entry["licence"] not in LICENCES:
+            raise ValueError(f"{entry['name']}: licence {entry['licence']!r} is not listed")
+        for key in ("audio", "beats", "downbeats", "licence_file"):
+            if not (root / entry[key]).is_file():
+                raise FileNotFoundError(f"{entry['name']}: {key} file {root / entry[key]} missing")
+        if entry["split"] not in splits:
+            continue
+        beats_s = _read_times(root / entry["beats"])
+        duration_s = float(entry["duration_s"])
+        if len(beats_s) < 2 or np.any(np.diff(beats_s) <= 0.0):
+            raise ValueError(f"{entry['name']}: beats are not strictly increasing")
+        if beats_s[0] < 0.0 or beats_s[-1] > duration_s:
+            raise ValueError(f"{entry['name']}: beats outside the audio (0-{duration_s} s)")
+        songs.append(
+            RealSong(
+                name=entry["name"],
+                title=entry["title"],
+                artist=entry["artist"],
+                split=entry["split"],
+                kind=entry["kind"],
+                audio_path=root / entry["audio"],
+                beats_s=beats_s,
+                downbeats_s=_read_times(root / entry["downbeats"]),
+                tempo_bpm=(float(entry["tempo_bpm"][0]), float(entry["tempo_bpm"][1])),
+                meter=entry["meter"],
+                licence=entry["licence"],
+                duration_s=duration_s,
+            )
+        )
+    return songs
+
+
+def load_audio_at(song: RealSong, sr: int) -> np.ndarray:
+    """The song's audio, mono, at ``sr`` Hz."""
+    from quaddance.music.audio import load_audio
+
+    return load_audio(song.audio_path, sr=sr)[0]
+
+
+# --- building the set -----------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class TempoMap:
+    """A chart's tempo map: ``bpm[i]`` holds from tick ``ticks[i]``; bars of ``beats_per_bar``."""
+
+    ticks_per_beat: int
+    ticks: tuple[int, ...]
+    bpm: tuple[float, ...]
+    beats_per_bar: int
+
+    def beat_times_s(self, end_s: float) -> np.ndarray:
+        """Times of the chart's beats (tick 0, then every ``ticks_per_beat``) up to ``end_s``."""
+        times, t_s, tick, k = [], 0.0, 0, 0
+        while t_s <= end_s:
+            times.append(t_s)
+            nxt = tick + self.ticks_per_beat
+            # Integrate seconds per tick across tempo changes inside this beat.
+            t_s += self._seconds(tick, nxt)
+            tick, k = nxt, k + 1
+        return np.array(times)
+
+    def _seconds(self, a: int, b: int) -> float:
+        total, edges = 0.0, [*self.ticks[1:], 2**62]
+        for start, end, bpm in zip(self.ticks, edges, self.bpm, strict=True):
+            lo, hi = max(a, start), min(b, end)
+            if hi > lo:
+                total += (hi - lo) / self.ticks_per_beat * 60.0 / bpm
+        return total
+
+
+def read_tempo_map(midi_path: Path) -> TempoMap:
+    """The tempo map of a chart: its tempo events, and its first time signature (MIDI's
+    default 4/4 where it has none)."""
+    import mido
+
+    midi = mido.MidiFile(str(midi_path))
+    tempos: dict[int, float] = {}
+    beats_per_bar = 4
+    for track in midi.tracks:
+        tick = 0
+        for msg in track:
+            tick += msg.time
+            if msg.type == "set_tempo":
+                tempos[tick] = round(float(mido.tempo2bpm(msg.tempo)), 3)
+            elif msg.type == "time_signature" and tick == 0:
+                beats_per_bar = msg.numerator * 4 // msg.denominator
+    if not tempos:
+        tempos[0] = 120.0
+    ticks = tuple(sorted(tempos))
+    return TempoMap(midi.ticks_per_beat, ticks, tuple(tempos[t] for t in ticks), beats_per_bar)
+
+
+ONSET_SR_HZ = 22050
+ONSET_HOP = 128
+"""Onset envelope hop, samples at ``ONSET_SR_HZ`` (5.8 ms)."""
+
+
+def _onset_env(y: np.ndarray) -> np.ndarray:
+    import librosa
+
+    return librosa.onset.onset_strength(y=y, sr=ONSET_SR_HZ, hop_length=ONSET_HOP)
+
+
+def _onset_peaks_s(env: np.ndarray) -> np.ndarray:
+    """Onset peaks: local maxima over +-30 ms above the envelope's mean over +-0.5 s, s."""
+    import scipy.ndimage
+
+    fps = ONSET_SR_HZ / ONSET_HOP
+    local_max = scipy.ndimage.maximum_filter1d(env, size=2 * round(0.03 * fps) + 1)
+    mean = scipy.ndimage.uniform_filter1d(env, size=2 * round(0.5 * fps) + 1)
+    frames = np.flatnonzero((env == local_max) & (env > mean))
+    return frames / fps
+
+
+def _detector_latency_s() -> float:
+    """How late `_onset_peaks_s` finds a click, s: subtracted from every onset time."""
+    import librosa
+
+    clicks_s = np.arange(0.5, 20.0, 0.37)
+    y = librosa.clicks(times=clicks_s, sr=ONSET_SR_HZ, length=21 * ONSET_SR_HZ)
+    return float(np.median(_nearest(_onset_peaks_s(_onset_env(y)), clicks_s) - clicks_s))
+
+
+def _nearest(sorted_s: np.ndarray, at_s: np.ndarray) -> np.ndarray:
+    """For each time in ``at_s``, the nearest time in ``sorted_s`` (non-empty, sorted)."""
+    j = np.clip(np.searchsorted(sorted_s, at_s), 1, len(sorted_s) - 1)
+    before, after = sorted_s[j - 1], sorted_s[j]
+    return np.where(np.abs(after - at_s) < np.abs(before - at_s), after, before)
+
+
+def grid_offset_s(onsets_s: np.ndarray, grid_s: np.ndarray, max_s: float = 0.1) -> float:
+    """The chart's sync: the shift of ``grid_s`` (beat times) that the most onsets sit on.
+
+    The mode, within +-``max_s``, of each onset's distance to its nearest grid beat
+    (histogram of 2 ms bins smoothed over +-6 ms): most notes of a recording made to a click
+    fall on the beat, so the mode is where the beat is heard.
+    """
+    d = onsets_s - _nearest(grid_s, onsets_s)
+    edges = np.arange(-max_s, max_s + 1e-9, 0.002)
+    hist, _ = np.histogram(d, bins=edges)
+    smooth = np.convolve(hist, np.ones(7), mode="same")
+    return float(0.5 * (edges[:-1] + edges[1:])[int(np.argmax(smooth))])
+
+
+def write_ogg(path: Path, y: np.ndarray, sr: int) -> None:
+    """Write mono ``y`` as Ogg Vorbis (``OGG_QUALITY``), a second at a time: libsndfile 1.2
+    crashes when a few minutes are written as one Vorbis block."""
+    import soundfile as sf
+
+    with sf.SoundFile(str(path), "w", sr, 1, format="OGG", subtype="VORBIS",
+                      compression_level=OGG_QUALITY) as f:  # fmt: skip
+        for i in range(0, len(y), sr):
+            f.write(y[i : i + sr])
+
+
+def _audible_span_s(y: np.ndarray, sr: int) -> tuple[float, float]:
+    frame = round(0.05 * sr)
+    n = len(y) // frame
+    rms = np.sqrt(np.mean(y[: n * frame].reshape(n, frame) ** 2, axis=1))
+    loud = np.flatnonzero(rms > rms.max() * 10 ** (SILENCE_DB / 20))
+    return loud[0] * frame / sr, (loud[-1] + 1) * frame / sr
+
+
+def _write_song(
+    src: SongSource,
+    y: np.ndarray,
+    beats_s: np.ndarray,
+    downbeats_s: np.ndarray,
+    tempo_map: TempoMap,
+    root: Path,
+) -> dict[str, Any]:
+    """Write the song's audio (mono, ``AUDIO_SR_HZ``) and beat files; its manifest entry."""
+    y = (0.95 * y / max(float(np.abs(y).max()), 1e-9)).astype(np.float32)
+    for folder in ("audio", "beats"):
+        (root / folder).mkdir(parents=True, exist_ok=True)
+    audio_rel = f"audio/{src.name}.ogg"
+    write_ogg(root / audio_rel, y, AUDIO_SR_HZ)
+    beats_rel, downbeats_rel = f"beats/{src.name}.beats", f"beats/{src.name}.downbeats"
+    np.savetxt(root / beats_rel, beats_s, fmt="%.4f")
+    np.savetxt(root / downbeats_rel, downbeats_s, fmt="%.4f")
+    return {
+        "name": src.name,
+        "kind": src.kind,
+        "title": src.title,
+        "artist": src.artist,
+        "split": src.split,
+        "audio": audio_rel,
+        "beats": beats_rel,
+        "downbeats": downbeats_rel,
+        "duration_s": round(len(y) / AUDIO_SR_HZ, 3),
+        "n_beats": len(beats_s),
+        "tempo_bpm": [min(tempo_map.bpm), max(tempo_map.bpm)],
+        "tempo_changes": len(set(tempo_map.bpm)) - 1,
+        "meter": f"{tempo_map.beats_per_bar}/4",
+        "licence": src.licence,
+        "licence_file": "LICENCES.md",
+        "notes": src.notes,
+    }
+
+
+def _audible_beats(
+    grid_s: np.ndarray, y: np.ndarray, tempo_map: TempoMap
+) -> tuple[np.ndarray, np.ndarray]:
+    """The grid's beats over the audible span, and those on the chart's bar lines."""
+    start_s, end_s = _audible_span_s(y, AUDIO_SR_HZ)
+    keep = np.flatnonzero((grid_s >= start_s) & (grid_s <= end_s))
+    return grid_s[keep], grid_s[keep[keep % tempo_map.beats_per_bar == 0]]
+
+
+def _build_recording(src: SongSource, package_dir: Path, root: Path) -> dict[str, Any]:
+    import librosa
+    import soundfile as sf
+
+    song_dir = package_dir / src.path
+    band, sr = sf.read(str(song_dir / "song.ogg"), always_2d=True)
+    guitar, sr_g = sf.read(str(song_dir / "guitar.ogg"), always_2d=True)
+    if sr != AUDIO_SR_HZ or sr_g != sr:
+        raise ValueError(f"{src.name}: expected {AUDIO_SR_HZ} Hz stems, got {sr} and {sr_g}")
+    n = min(len(band), len(guitar))
+    y = (band[:n] + guitar[:n]).mean(axis=1)
+    tempo_map = read_tempo_map(song_dir / "notes.mid")
+    grid_s = tempo_map.beat_times_s(n / sr)
+    y_onset = librosa.resample(y, orig_sr=sr, target_sr=ONSET_SR_HZ)
+    onsets_s = _onset_peaks_s(_onset_env(y_onset)) - _detector_latency_s()
+    # The sync is measured on the first half and checked on the second (`check_song`).
+    offset_s = round(grid_offset_s(onsets_s[onsets_s < n / sr / 2], grid_s), 3)
+    beats_s, downbeats_s = _audible_beats(grid_s + offset_s, y, tempo_map)
+    entry = _write_song(src, y, beats_s, downbeats_s, tempo_map, root)
+    entry["source"] = {
+        "paths": [f"{src.path}/{f}" for f in ("song.ogg", "guitar.ogg")],
+        "chart": f"{src.path}/notes.mid",
+    }
+    entry["annotation"] = (
+        "the chart's tempo map (notes.mid): a beat every quarter note from tick 0, shifted by "
+        f"the chart's sync {offset_s * 1000:+.0f} ms (grid_offset_s, measured on the first "
+        "half); downbeats every bar of the chart's meter from tick 0; beats over the audible span"
+    )
+    entry["grid_offset_s"] = offset_s
+    return entry
+
+
+def _build_midi_render(src: SongSource, package_dir: Path, root: Path) -> dict[str, Any]:
+    from quaddance.bench.beats import find_soundfont, render_midi
+    from quaddance.music.audio import load_audio
+
+    midi_path = package_dir / src.path
+    with tempfile.TemporaryDirectory(prefix="quaddance-render-") as tmp:
+        wav = Path(tmp) / "render.wav"
+        render_midi(midi_path, wav, find_soundfont(), AUDIO_SR_HZ)
+        y, _ = load_audio(wav, sr=AUDIO_SR_HZ)
+    tempo_map = read_tempo_map(midi_path)
+    beats_s, downbeats_s = _audible_beats(
+        tempo_map.beat_times_s(len(y) / AUDIO_SR_HZ), y, tempo_map
+    )
+    entry = _write_song(src, y, beats_s, downbeats_s, tempo_map, root)
+    entry["source"] = {"paths": [src.path], "soundfont": find_soundfont().name}
+    entry["annotation"] = (
+        "the MIDI file's tempo map: a beat every quarter note from tick 0 (exact: the audio is "
+        "rendered from the same file); downbeats every bar of its first time signature; beats "
+        "over the audible span"
+    )
+    return entry
+
+
+def build(root: Path = ROOT, debs: dict[str, Path] | None = None) -> dict[str, Any]:
+    """Download the Debian packages (unless ``debs`` gives their .deb files), write the audio,
+    beat files and manifest under ``root``."""
+    packages = sorted({s.package for s in SONGS})
+    entries = []
+    with tempfile.TemporaryDirectory(prefix="quaddance-real-") as tmp:
+        tmp_dir = Path(tmp)
+        if debs is None:
+            subprocess.run(["apt-get", "download", *packages], cwd=tmp_dir, check=True)
+            debs = {p: next(tmp_dir.glob(f"{p}_*.deb")) for p in packages}
+        for package in packages:
+            subprocess.run(
+                ["dpkg-deb", "-x", str(debs[package]), str(tmp_dir / package)], check=True
+            )
+        for src in SONGS:
+            build_song = _build_midi_render if src.kind == "midi_render" else _build_recording
+            entry = build_song(src, tmp_dir / src.package, root)
+            entry["source"] = {
+                "debian_package": src.package,
+                "package_version": debs[src.package].name.split("_")[1],
+                **entry["source"],
+            }
+            entries.append(entry)
+    manifest = {
+        "description": (
+            "Music made by people elsewhere, with exact beats: band recordings (the Frets on "
+            "Fire song packs of Debian, band and guitar stems mixed to mono, beats from each "
+            "chart's tempo map) and MIDI songs (OpenTTD's OpenMSX set, rendered with fluidsynth)"
+        ),
+        "built_by": f"python -m {__name__} build",
+        "splits": {s: [e["name"] for e in entries if e["split"] == s] for s in SPLITS},
+        "split_reason": SPLIT_REASON,
+        "licences": LICENCES,
+        "songs": entries,
+    }
+    (root / MANIFEST_NAME).write_text(json.dumps(manifest, indent=2) + "\n")
+    return manifest
+
+
+# --- checking the beats against the audio ---------------------------------------------------
+
+
+def check_song(song: RealSong, clicks_dir: Path | None = None) -> dict[str, Any]:
+    """How well the beats sit on the recording's onsets (no tracker involved).
+
+    Each beat is a click; its offset is the distance from the click to the nearest onset
+    peak of the recording (onset strength peaks, the detector's own latency measured on clicks
+    and removed). Reported over the whole song and over its second half (the sync was
+    measured on the first), and for a control grid half a beat late, where a correct
+    annotation should find far fewer onsets.
+
+    Args:
+        song: the song.
+        clicks_dir: if given, the recording with the clicks mixed over it is written there
+            (``NAME_clicks.ogg``) for listening.
+    """
+    import librosa
+
+    y = load_audio_at(song, ONSET_SR_HZ)
+    env = _onset_env(y)
+    env = env / env.mean()
+    onsets_s = _onset_peaks_s(env) - _detector_latency_s()
+    if clicks_dir is not None:
+        clicks = librosa.clicks(times=song.beats_s, sr=ONSET_SR_HZ, length=len(y))
+        clicks_dir.mkdir(parents=True, exist_ok=True)
+        write_ogg(clicks_dir / f"{song.name}_clicks.ogg", 0.7 * y + 0.3 * clicks, ONSET_SR_HZ)
+
+    def stats(beats_s: np.ndarray) -> dict[str, float | None]:
+        off_s = _nearest(onsets_s, beats_s) - beats_s
+        near = np.abs(off_s) <= 0.07
+        return {
+            "median_offset_ms": round(1000 * float(np.median(off_s[near])), 1)
+            if near.any() else None,
+            "frac_onset_within_25ms": round(float(np.mean(np.abs(off_s) <= 0.025)), 3),
+            "frac_onset_within_50ms": round(float(np.mean(np.abs(off_s) <= 0.05)), 3),
+            "onset_strength": round(_strength_at(env, beats_s), 3),
+        }  # fmt: skip
+
+    half_s = song.duration_s / 2
+    period_s = np.diff(song.beats_s)
+    shifted = song.beats_s[:-1] + 0.5 * period_s
+    return {
+        "name": song.name,
+        "split": song.split,
+        "whole": stats(song.beats_s),
+        "second_half": stats(song.beats_s[song.beats_s >= half_s]),
+        "control_half_beat_late": stats(shifted),
+        "downbeat_low_band_phase": _bar_phase_profile(y, song),
+    }
+
+
+def _strength_at(env: np.ndarray, times_s: np.ndarray, half_width_s: float = 0.025) -> float:
+    """Mean over ``times_s`` of the envelope's maximum within +-``half_width_s`` (in units of
+    the envelope's mean)."""
+    import scipy.ndimage
+
+    fps = ONSET_SR_HZ / ONSET_HOP
+    peak = scipy.ndimage.maximum_filter1d(env, size=2 * round(half_width_s * fps) + 1)
+    return float(peak[np.clip(np.round(times_s * fps).astype(int), 0, len(env) - 1)].mean())
+
+
+def _bar_phase_profile(y: np.ndarray, song: RealSong) -> list[float]:
+    """Mean low-band (< 150 Hz: kick, bass) onset strength at each beat of the bar, beat 1
+    first, relative to their mean: a chart whose bar lines are right usually peaks at 1."""
+    import librosa
+
+    env = librosa.onset.onset_strength(y=y, sr=ONSET_SR_HZ, hop_length=ONSET_HOP, fmax=150.0,
+                                       n_mels=16)  # fmt: skip
+    fps = ONSET_SR_HZ / ONSET_HOP
+    bar = int(song.meter.split("/")[0])
+    first = int(np.searchsorted(song.beats_s, song.downbeats_s[0] - 1e-6))
+    frames = np.round(song.beats_s * fps).astype(int)
+    strength = env[np.clip(frames, 0, len(env) - 1)]
+    phase = (np.arange(len(frames)) - first) % bar
+    means = np.array([strength[phase == k].mean() for k in range(bar)])
+    return [round(float(v), 3) for v in means / means.mean()]
+
+
+# --- scoring the trackers -------------------------------------------------------------------
+
+
+def _librosa_beats_s(y: np.ndarray, sr: int) -> np.ndarray:
+    import librosa
+
+    _, frames = librosa.beat.beat_track(y=y, sr=sr)
+    return librosa.frames_to_time(frames, sr=sr)
+
+
+def _scores(prefix: str, ref_s: np.ndarray, est_s: np.ndarray) -> dict[str, float]:
+    from quaddance.bench.beats import (
+        F_MEASURE_WINDOW_S,
+        beat_f_measure,
+        metrical_level_f_measure,
+    )
+
+    tempo = float(60.0 / np.median(np.diff(est_s))) if len(est_s) > 1 else 0.0
+    err_s = _nearest(est_s, ref_s) - ref_s if len(est_s) > 1 else np.array([])
+    hits = err_s[np.abs(err_s) <= F_MEASURE_WINDOW_S]
+    return {
+        f"f_{prefix}": round(beat_f_measure(ref_s, est_s), 4),
+        f"f_metrical_{prefix}": round(metrical_level_f_measure(ref_s, est_s), 4),
+        f"tempo_bpm_{prefix}": round(tempo, 2),
+        # Median signed error of the estimates that hit a true beat: a bias of the tracker
+        # (or of the annotation, were all trackers off alike).
+        f"offset_ms_{prefix}": round(1000 * float(np.median(hits)), 1) if len(hits) else None,
+    }
+
+
+def _downbeat_f(song: RealSong, est_s: np.ndarray, start_s: float = 0.0) -> float:
+    from quaddance.bench.beats import beat_f_measure
+
+    ref = song.downbeats_s[song.downbeats_s >= start_s]
+    return round(beat_f_measure(ref, est_s[est_s >= start_s]), 4)
+
+
+def score_song(song: RealSong, madmom_s: np.ndarray | None = None) -> dict[str, Any]:
+    """Strict and metrical-level F (+-70 ms) of each tracker on ``song``, and more.
+
+    Offline: ``analyze`` (what ``quaddance analyze`` runs) and librosa's ``beat_track`` over
+    the whole song. Online: the ``OnlineBeatTracker`` fed the file block by block at full
+    speed; ``lock_s`` is its first lock, ``f*_online`` are scored after it and
+    ``f_metrical_online_whole`` over the whole song.
+    """
+    from quaddance.bench.live import track_online
+    from quaddance.music.analysis import analyze
+    from quaddance.music.audio import DEFAULT_SR
+    from quaddance.music.online_beats import SR_HZ
+
+    ref = song.beats_s
+    y = load_audio_at(song, DEFAULT_SR)
+    t0 = time.perf_counter()
+    offline = analyze(y, DEFAULT_SR)
+    t1 = time.perf_counter()
+    lib_s = _librosa_beats_s(y, DEFAULT_SR)
+    y_online = y if SR_HZ == DEFAULT_SR else load_audio_at(song, SR_HZ)
+    events, lock_track, cpu_s = track_online(y_online, SR_HZ)
+    online_s = np.array([e.time_s for e in events])
+    lock_s = next((t for t, locked in lock_track if locked), None)
+    after = song.duration_s if lock_s is None else lock_s
+    online_db_s = np.array([e.time_s for e in events if e.downbeat])
+    row: dict[str, Any] = {
+        "name": song.name,
+        "split": song.split,
+        "true_tempo_bpm": song.tempo_bpm[0] if song.tempo_bpm[0] == song.tempo_bpm[1]
+        else list(song.tempo_bpm),
+        "duration_s": round(song.duration_s, 2),
+        "n_beats": len(ref),
+        **_scores("offline", ref, offline.beats_s),
+        "f_downbeat_offline": _downbeat_f(song, offline.downbeats_s),
+        "offline_beats_increasing": bool(np.all(np.diff(offline.beats_s) > 0)),
+        **_scores("librosa", ref, lib_s),
+        "lock_s": None if lock_s is None else round(lock_s, 3),
+        **_scores("online", ref[ref >= after], online_s[online_s >= after]),
+        "f_metrical_online_whole": _scores("x", ref, online_s)["f_metrical_x"],
+        "online_beats_increasing": bool(np.all(np.diff(online_s) > 0)),
+        "f_downbeat_online": _downbeat_f(song, online_db_s, after),
+        "online_cpu_per_audio_s": round(cpu_s / song.duration_s, 4),
+        "offline_cpu_s": round(t1 - t0, 2),
+    }  # fmt: skip
+    if madmom_s is not None:
+        row.update(_scores("madmom_dbn", ref, madmom_s))
+    return row
+
+
+MEAN_KEYS = (
+    "f_offline", "f_metrical_offline", "f_downbeat_offline", "f_librosa", "f_metrical_librosa",
+    "f_online", "f_metrical_online", "f_metrical_online_whole", "f_downbeat_online",
+    "f_madmom_dbn", "f_metrical_madmom_dbn",
+)  # fmt: skip
+
+
+def _means(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {
+        "n_songs": len(rows),
+        "minutes": round(sum(r["duration_s"] for r in rows) / 60, 1),
+    }
+    for key in MEAN_KEYS:
+        if rows and all(key in r for r in rows):
+            out[key] = round(float(np.mean([r[key] for r in rows])), 4)
+    locks = [r["lock_s"] for r in rows]
+    out["locked_within_6s"] = sum(1 for s in locks if s is not None and s <= 6.0)
+    return out
+
+
+def run_real_bench(
+    out_path: Path,
+    root: Path = ROOT,
+    madmom_python: str | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> dict[str, Any]:
+    """Score the trackers on both splits; write and return the results."""
+    from quaddance.fileio import write_json
+
+    songs = load_songs(root)
+    madmom: dict[str, np.ndarray] = {}
+    if madmom_python is not None:
+        from quaddance.bench.beats import madmom_beats_s
+
+        by_path = madmom_beats_s(madmom_python, [s.audio_path for s in songs])
+        madmom = {s.name: by_path[str(s.audio_path)] for s in songs}
+    rows = []
+    for song in songs:
+        if progress is not None:
+            progress(song.name)
+        rows.append(score_song(song, madmom.get(song.name)))
+    results = {
+        "benchmark": "beats_real",
+        "set": "benchmarks/real_music (manifest.json): band recordings, beats from the charts",
+        "metric": (
+            "beat F-measure, +-70 ms, one-to-one, no trim; f = strict, f_metrical = at the "
+            "tracker's own metrical level (same, double or half tempo reference); online "
+            "scores count the beats after the first lock (lock_s); downbeat F strict"
+        ),
+        "command": f"python -m {__name__} bench",
+        "madmom_python": madmom_python,
+        "means": {split: _means([r for r in rows if r["split"] == split]) for split in SPLITS},
+        "songs": rows,
+    }
+    write_json(out_path, results)
+    return results
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(
+        prog=f"python -m {__name__}", description=__doc__.split("\n")[0]
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+    b = sub.add_parser("build", help="download the Debian packages; write audio, beats, manifest")
+    b.add_argument("--deb", nargs="*", type=Path, default=None, help="the .deb files, if at hand")
+    c = sub.add_parser("check", help="check the beats against the recordings' onsets")
+    c.add_argument("--out", type=Path, default=Path("benchmarks/results/real_music_check.json"))
+    c.add_argument("--clicks-dir", type=Path, default=None, help="write click-mixed audio here")
+    r = sub.add_parser("bench", help="score the trackers on both splits")
+    r.add_argument("--out", type=Path, default=Path("benchmarks/results/beats_real.json"))
+    r.add_argument("--madmom-python", default=None, help="an interpreter that imports madmom")
+    args = parser.parse_args(argv)
+    if args.command == "build":
+        debs = None
+        if args.deb:
+            debs = {p.name.split("_")[0]: p.resolve() for p in args.deb}
+        build(debs=debs)
+    elif args.command == "check":
+        from quaddance.fileio import write_json
+
+        rows = [check_song(s, args.clicks_dir) for s in load_songs()]
+        write_json(args.out, {"benchmark": "real_music_check", "command":
+                              f"python -m {__name__} check", "songs": rows})  # fmt: skip
+        for row in rows:
+            print(row["name"], row["whole"], row["second_half"], row["control_half_beat_late"])
+    else:
+        results = run_real_bench(args.out, madmom_python=args.madmom_python,
+                                 progress=lambda name: print(name, flush=True))  # fmt: skip
+        print(json.dumps(results["means"], indent=2))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,94 @@
+"""The real-music beat set (benchmarks/real_music): manifest, files, beats, splits, licences."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import soundfile as sf
+
+from benchmarks.real_music import (
+    LICENCES,
+    ROOT,
+    SONGS,
+    SPLITS,
+    grid_offset_s,
+    load_manifest,
+    load_songs,
+    read_tempo_map,
+)
+
+
+def test_manifest_loads_and_every_listed_file_exists() -> None:
+    manifest = load_manifest()
+    songs = load_songs()
+    assert [s.name for s in songs] == [e["name"] for e in manifest["songs"]]
+    assert {e["name"] for e in manifest["songs"]} == {s.name for s in SONGS}
+    for entry in manifest["songs"]:
+        for key in ("audio", "beats", "downbeats", "licence_file"):
+            assert (ROOT / entry[key]).is_file(), (entry["name"], key)
+        assert entry["licence"] in LICENCES
+    assert len(songs) >= 8
+    assert sum(s.duration_s for s in songs) >= 20 * 60
+    audio_bytes = sum(s.audio_path.stat().st_size for s in songs)
+    assert audio_bytes <= 50e6
+
+
+def test_beats_strictly_increasing_and_inside_the_audio() -> None:
+    for song in load_songs():
+        info = sf.info(str(song.audio_path))
+        assert info.duration == pytest.approx(song.duration_s, abs=0.01), song.name
+        assert np.all(np.diff(song.beats_s) > 0.0), song.name
+        assert song.beats_s[0] >= 0.0 and song.beats_s[-1] <= info.duration, song.name
+        # Downbeats are beats, one per bar of the meter.
+        assert np.isin(song.downbeats_s, song.beats_s).all(), song.name
+        beats_per_bar = int(song.meter.split("/")[0])
+        assert len(song.downbeats_s) == pytest.approx(len(song.beats_s) / beats_per_bar, abs=1)
+
+
+def test_splits_are_disjoint_and_cover_the_set() -> None:
+    manifest = load_manifest()
+    parts = {split: {s.name for s in load_songs(splits=(split,))} for split in SPLITS}
+    assert parts["tuning"] and parts["heldout"]
+    assert not parts["tuning"] & parts["heldout"]
+    assert parts["tuning"] | parts["heldout"] == {e["name"] for e in manifest["songs"]}
+    assert {k: set(v) for k, v in manifest["splits"].items()} == parts
+    # The held-out part is the larger (about 60 %), so its means say more.
+    assert len(parts["heldout"]) > len(parts["tuning"])
+
+
+def test_unknown_split_is_refused() -> None:
+    with pytest.raises(ValueError, match="unknown split"):
+        load_songs(splits=("test",))
+
+
+def test_tempo_map_beats_follow_tempo_changes(tmp_path: Path) -> None:
+    mido = pytest.importorskip("mido")
+    midi = mido.MidiFile(ticks_per_beat=480)
+    track = mido.MidiTrack()
+    track.append(mido.MetaMessage("time_signature", numerator=3, denominator=4, time=0))
+    track.append(mido.MetaMessage("set_tempo", tempo=mido.bpm2tempo(120), time=0))
+    # Four beats at 120 BPM, then 60 BPM from half-way through the fifth beat.
+    track.append(mido.MetaMessage("set_tempo", tempo=mido.bpm2tempo(60), time=4 * 480 + 240))
+    track.append(mido.MetaMessage("end_of_track", time=4 * 480))
+    midi.tracks.append(track)
+    path = tmp_path / "chart.mid"
+    midi.save(str(path))
+    tempo_map = read_tempo_map(path)
+    assert tempo_map.beats_per_bar == 3
+    assert tempo_map.bpm == (120.0, 60.0)
+    beats = tempo_map.beat_times_s(4.0)
+    np.testing.assert_allclose(beats, [0.0, 0.5, 1.0, 1.5, 2.0, 2.75, 3.75])
+
+
+def test_grid_offset_finds_where_most_onsets_fall() -> None:
+    rng = np.random.default_rng(0)
+    grid = np.arange(0.0, 60.0, 0.4)
+    # Most onsets 30 ms after each beat, some on the off-beats and some anywhere.
+    onsets = np.sort(
+        np.concatenate(
+            [grid + 0.03 + rng.normal(0, 0.003, len(grid)), grid[::3] + 0.2, rng.uniform(0, 60, 40)]
+        )
+    )
+    assert grid_offset_s(onsets, grid) == pytest.approx(0.03, abs=0.004)
