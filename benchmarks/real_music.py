@@ -633,12 +633,15 @@ def _scores(prefix: str, ref_s: np.ndarray, est_s: np.ndarray) -> dict[str, floa
     )
 
     tempo = float(60.0 / np.median(np.diff(est_s))) if len(est_s) > 1 else 0.0
+    true_bpm = float(60.0 / np.median(np.diff(ref_s)))
     err_s = _nearest(est_s, ref_s) - ref_s if len(est_s) > 1 else np.array([])
     hits = err_s[np.abs(err_s) <= F_MEASURE_WINDOW_S]
     return {
         f"f_{prefix}": round(beat_f_measure(ref_s, est_s), 4),
         f"f_metrical_{prefix}": round(metrical_level_f_measure(ref_s, est_s), 4),
         f"tempo_bpm_{prefix}": round(tempo, 2),
+        # Within 4 % of the true tempo (its median beat period), its double or its half.
+        f"tempo_ok_{prefix}": any(abs(tempo / (true_bpm * k) - 1.0) <= 0.04 for k in (0.5, 1, 2)),
         # Median signed error of the estimates that hit a true beat: a bias of the tracker
         # (or of the annotation, were all trackers off alike).
         f"offset_ms_{prefix}": round(1000 * float(np.median(hits)), 1) if len(hits) else None,
@@ -660,6 +663,7 @@ def score_song(song: RealSong, madmom_s: np.ndarray | None = None) -> dict[str, 
     speed; ``lock_s`` is its first lock, ``f*_online`` are scored after it and
     ``f_metrical_online_whole`` over the whole song.
     """
+    from quaddance.bench.beats import metrical_level_f_measure
     from quaddance.bench.live import track_online
     from quaddance.music.analysis import analyze
     from quaddance.music.audio import DEFAULT_SR
@@ -680,6 +684,7 @@ def score_song(song: RealSong, madmom_s: np.ndarray | None = None) -> dict[str, 
     row: dict[str, Any] = {
         "name": song.name,
         "split": song.split,
+        "kind": song.kind,
         "true_tempo_bpm": song.tempo_bpm[0] if song.tempo_bpm[0] == song.tempo_bpm[1]
         else list(song.tempo_bpm),
         "duration_s": round(song.duration_s, 2),
@@ -690,7 +695,7 @@ def score_song(song: RealSong, madmom_s: np.ndarray | None = None) -> dict[str, 
         **_scores("librosa", ref, lib_s),
         "lock_s": None if lock_s is None else round(lock_s, 3),
         **_scores("online", ref[ref >= after], online_s[online_s >= after]),
-        "f_metrical_online_whole": _scores("x", ref, online_s)["f_metrical_x"],
+        "f_metrical_online_whole": round(metrical_level_f_measure(ref, online_s), 4),
         "online_beats_increasing": bool(np.all(np.diff(online_s) > 0)),
         "f_downbeat_online": _downbeat_f(song, online_db_s, after),
         "online_cpu_per_audio_s": round(cpu_s / song.duration_s, 4),
@@ -716,8 +721,13 @@ def _means(rows: list[dict[str, Any]]) -> dict[str, Any]:
     for key in MEAN_KEYS:
         if rows and all(key in r for r in rows):
             out[key] = round(float(np.mean([r[key] for r in rows])), 4)
-    locks = [r["lock_s"] for r in rows]
-    out["locked_within_6s"] = sum(1 for s in locks if s is not None and s <= 6.0)
+    for tracker in ("offline", "online", "librosa", "madmom_dbn"):
+        if rows and all(f"tempo_ok_{tracker}" in r for r in rows):
+            out[f"tempo_ok_{tracker}"] = sum(r[f"tempo_ok_{tracker}"] for r in rows)
+    locks = [r["lock_s"] for r in rows if r["lock_s"] is not None]
+    out["n_locked"] = len(locks)
+    out["locked_within_6s"] = sum(1 for s in locks if s <= 6.0)
+    out["lock_s_median"] = round(float(np.median(locks)), 2) if locks else None
     return out
 
 
@@ -752,7 +762,17 @@ def run_real_bench(
         ),
         "command": f"python -m {__name__} bench",
         "madmom_python": madmom_python,
-        "means": {split: _means([r for r in rows if r["split"] == split]) for split in SPLITS},
+        # Per split, and per split and kind: the recordings are the harder, truer test.
+        "means": {
+            **{split: _means([r for r in rows if r["split"] == split]) for split in SPLITS},
+            **{
+                f"{split}_{kind}": _means(
+                    [r for r in rows if r["split"] == split and r["kind"] == kind]
+                )
+                for split in SPLITS
+                for kind in KINDS
+            },
+        },
         "songs": rows,
     }
     write_json(out_path, results)
