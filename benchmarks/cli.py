@@ -7,7 +7,7 @@ app); each body runs its benchmark from this package and prints a summary.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -133,7 +133,12 @@ def bench_beats_cmd(
         int, typer.Option(help="Songs in the random MIDI set (not tuned on).", min=0, max=1000)
     ] = 12,
     sets: Annotated[
-        str, typer.Option(help="Comma-separated sets to score: tuning, random, untuned.")
+        str,
+        typer.Option(
+            help="Comma-separated sets to score: tuning, random, untuned (MIDI songs written "
+            "here), real (music made by people elsewhere, benchmarks/real_music: its results "
+            "go to OUT with _real added to the name)."
+        ),
     ] = "tuning,random,untuned",
     madmom_python: Annotated[
         Path | None,
@@ -157,6 +162,11 @@ def bench_beats_cmd(
 
     console = Console(stderr=True)
     chosen = tuple(s.strip() for s in sets.split(",") if s.strip())
+    if "real" in chosen:
+        _bench_real_beats(out, madmom_python, console)
+        chosen = tuple(s for s in chosen if s != "real")
+        if not chosen:
+            return
     with console.status("Scoring beats...") as status:
         results = run_beat_bench(
             out,
@@ -182,6 +192,41 @@ def bench_beats_cmd(
         table.add_row(f"mean ({mean['n_songs']} songs)", set_name, "", *cells)
     Console().print(table)
     print(f"-> {out}")
+
+
+def _bench_real_beats(out: Path, madmom_python: Path | None, console: Any) -> None:
+    """``bench beats --sets real``: the real-music set, offline, online and librosa."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from benchmarks.real_music import run_real_bench
+
+    real_out = out.with_name(f"{out.stem}_real{out.suffix}")
+    with console.status("Scoring beats on real music...") as status:
+        results = run_real_bench(
+            real_out,
+            madmom_python=None if madmom_python is None else str(madmom_python),
+            progress=lambda name: status.update(f"Scoring {name}..."),
+        )
+    trackers = ["offline", "online", "librosa"]
+    if madmom_python is not None:
+        trackers.append("madmom_dbn")
+    table = Table(title="real music, beat F (+-70 ms): strict / at the tracker's metrical level")
+    for col in ("song", "split", "kind", "BPM", *trackers, "lock s"):
+        table.add_column(col)
+    for row in results["songs"]:
+        cells = [f"{row[f'f_{t}']:.3f} / {row[f'f_metrical_{t}']:.3f}" for t in trackers]
+        bpm = row["true_tempo_bpm"]
+        bpm_text = f"{bpm:g}" if isinstance(bpm, float) else f"{bpm[0]:g}-{bpm[1]:g}"
+        table.add_row(row["name"], row["split"], row["kind"], bpm_text, *cells, str(row["lock_s"]))
+    for part, mean in results["means"].items():
+        cells = [
+            f"{mean[f'f_{t}']:.3f} / {mean[f'f_metrical_{t}']:.3f}" if f"f_{t}" in mean else "-"
+            for t in trackers
+        ]
+        table.add_row(f"mean ({mean['n_songs']} songs)", part, "", "", *cells, "")
+    Console().print(table)
+    print(f"-> {real_out}")
 
 
 @app.command("choreograph")

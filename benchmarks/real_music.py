@@ -475,7 +475,7 @@ def _build_recording(src: SongSource, package_dir: Path, root: Path) -> dict[str
 
 
 def _build_midi_render(src: SongSource, package_dir: Path, root: Path) -> dict[str, Any]:
-    from quaddance.bench.beats import find_soundfont, render_midi
+    from benchmarks.beats import find_soundfont, render_midi
     from quaddance.music.audio import load_audio
 
     midi_path = package_dir / src.path
@@ -626,14 +626,14 @@ def _librosa_beats_s(y: np.ndarray, sr: int) -> np.ndarray:
 
 
 def _scores(prefix: str, ref_s: np.ndarray, est_s: np.ndarray) -> dict[str, float]:
-    from quaddance.bench.beats import (
+    from benchmarks.beats import (
         F_MEASURE_WINDOW_S,
         beat_f_measure,
         metrical_level_f_measure,
     )
 
     tempo = float(60.0 / np.median(np.diff(est_s))) if len(est_s) > 1 else 0.0
-    true_bpm = float(60.0 / np.median(np.diff(ref_s)))
+    true_bpm = float(60.0 / np.median(np.diff(ref_s))) if len(ref_s) > 1 else float("nan")
     err_s = _nearest(est_s, ref_s) - ref_s if len(est_s) > 1 else np.array([])
     hits = err_s[np.abs(err_s) <= F_MEASURE_WINDOW_S]
     return {
@@ -649,7 +649,7 @@ def _scores(prefix: str, ref_s: np.ndarray, est_s: np.ndarray) -> dict[str, floa
 
 
 def _downbeat_f(song: RealSong, est_s: np.ndarray, start_s: float = 0.0) -> float:
-    from quaddance.bench.beats import beat_f_measure
+    from benchmarks.beats import beat_f_measure
 
     ref = song.downbeats_s[song.downbeats_s >= start_s]
     return round(beat_f_measure(ref, est_s[est_s >= start_s]), 4)
@@ -660,14 +660,13 @@ def score_song(song: RealSong, madmom_s: np.ndarray | None = None) -> dict[str, 
 
     Offline: ``analyze`` (what ``quaddance analyze`` runs) and librosa's ``beat_track`` over
     the whole song. Online: the ``OnlineBeatTracker`` fed the file block by block at full
-    speed; ``lock_s`` is its first lock, ``f*_online`` are scored after it and
-    ``f_metrical_online_whole`` over the whole song.
+    speed (`track_file`, decoded as ``live --from-file`` decodes it); ``lock_s`` is its first
+    lock, ``f*_online`` are scored after it and ``f_metrical_online_whole`` over the song.
     """
-    from quaddance.bench.beats import metrical_level_f_measure
-    from quaddance.bench.live import track_online
+    from benchmarks.beats import metrical_level_f_measure
     from quaddance.music.analysis import analyze
     from quaddance.music.audio import DEFAULT_SR
-    from quaddance.music.online_beats import SR_HZ
+    from quaddance.music.live import track_file
 
     ref = song.beats_s
     y = load_audio_at(song, DEFAULT_SR)
@@ -675,12 +674,10 @@ def score_song(song: RealSong, madmom_s: np.ndarray | None = None) -> dict[str, 
     offline = analyze(y, DEFAULT_SR)
     t1 = time.perf_counter()
     lib_s = _librosa_beats_s(y, DEFAULT_SR)
-    y_online = y if SR_HZ == DEFAULT_SR else load_audio_at(song, SR_HZ)
-    events, lock_track, cpu_s = track_online(y_online, SR_HZ)
-    online_s = np.array([e.time_s for e in events])
-    lock_s = next((t for t, locked in lock_track if locked), None)
+    online = track_file(song.audio_path)
+    online_s = online.beats_s
+    lock_s = online.first_lock_s()
     after = song.duration_s if lock_s is None else lock_s
-    online_db_s = np.array([e.time_s for e in events if e.downbeat])
     row: dict[str, Any] = {
         "name": song.name,
         "split": song.split,
@@ -697,8 +694,8 @@ def score_song(song: RealSong, madmom_s: np.ndarray | None = None) -> dict[str, 
         **_scores("online", ref[ref >= after], online_s[online_s >= after]),
         "f_metrical_online_whole": round(metrical_level_f_measure(ref, online_s), 4),
         "online_beats_increasing": bool(np.all(np.diff(online_s) > 0)),
-        "f_downbeat_online": _downbeat_f(song, online_db_s, after),
-        "online_cpu_per_audio_s": round(cpu_s / song.duration_s, 4),
+        "f_downbeat_online": _downbeat_f(song, online.downbeats_s, after),
+        "online_cpu_per_audio_s": round(online.tracker_s / song.duration_s, 4),
         "offline_cpu_s": round(t1 - t0, 2),
     }  # fmt: skip
     if madmom_s is not None:
@@ -743,7 +740,7 @@ def run_real_bench(
     songs = load_songs(root)
     madmom: dict[str, np.ndarray] = {}
     if madmom_python is not None:
-        from quaddance.bench.beats import madmom_beats_s
+        from benchmarks.beats import madmom_beats_s
 
         by_path = madmom_beats_s(madmom_python, [s.audio_path for s in songs])
         madmom = {s.name: by_path[str(s.audio_path)] for s in songs}
