@@ -12,20 +12,23 @@ Two kinds of song, each from a Debian package (``benchmarks/real_music/LICENCES.
 - ``midi_render``: MIDI songs of OpenTTD's music set (``openttd-openmsx``, GPL-2), composed
   by people for the game, rendered here with fluidsynth and a General MIDI soundfont: they
   bring what the recordings lack (3/4 and 6/4, tempo ramps and changes, 64-90 BPM), with
-  beats exact by construction, but they are sequenced and so easier than a band.
+  beats exact by construction (the notes' starts; the rendered onsets peak 14-32 ms later, the
+  instruments' attacks), but they are sequenced and so easier than a band.
 
 Each song is one mono Ogg Vorbis file under ``audio/``, its beats and downbeats text under
 ``beats/`` (one time in seconds a line), and ``manifest.json`` lists them.
 
 Commands (run from the repository root):
 
-- ``python -m benchmarks.real_music build`` downloads the two Debian packages with
-  ``apt-get download`` and writes the audio, beat files and manifest again.
+- ``python -m benchmarks.real_music build`` downloads the three Debian packages with
+  ``apt-get download`` and writes the audio, beat files and manifest again (it renders with
+  fluidsynth, as ``bench beats`` does).
 - ``python -m benchmarks.real_music check`` measures how well the beats sit on the audio's
   onsets (`check_song`) and writes ``benchmarks/results/real_music_check.json``.
-- ``python -m benchmarks.real_music bench`` scores the offline analyser, the online tracker and
-  librosa's ``beat_track`` (and madmom's DBN tracker with ``--madmom-python``) on both splits
-  and writes ``benchmarks/results/beats_real.json``.
+- ``quaddance bench beats --sets real`` (or ``python -m benchmarks.real_music bench``) scores
+  the offline analyser, the online tracker and librosa's ``beat_track`` (and madmom's DBN
+  tracker with ``--madmom-python``) on both splits and writes
+  ``benchmarks/results/beats_real.json``.
 
 The split (``SONGS``' ``split``) was fixed before any tracker was run on these songs: the
 ``tuning`` part may be used to choose settings, the ``heldout`` part only to report them.

@@ -9,6 +9,7 @@ import pytest
 import soundfile as sf
 
 from benchmarks.real_music import (
+    KINDS,
     LICENCES,
     ROOT,
     SONGS,
@@ -29,8 +30,10 @@ def test_manifest_loads_and_every_listed_file_exists() -> None:
         for key in ("audio", "beats", "downbeats", "licence_file"):
             assert (ROOT / entry[key]).is_file(), (entry["name"], key)
         assert entry["licence"] in LICENCES
-    assert len(songs) >= 8
-    assert sum(s.duration_s for s in songs) >= 20 * 60
+        assert entry["kind"] in KINDS
+    recordings = [s for s in songs if s.kind == "recording"]
+    assert len(recordings) >= 8
+    assert sum(s.duration_s for s in recordings) >= 20 * 60
     audio_bytes = sum(s.audio_path.stat().st_size for s in songs)
     assert audio_bytes <= 50e6
 
