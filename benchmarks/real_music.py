@@ -30,7 +30,7 @@ Commands (run from the repository root):
   tracker with ``--madmom-python``) on both splits and writes
   ``benchmarks/results/beats_real.json``.
 
-The split (``SONGS``' ``split``) was fixed before any tracker was run on these songs: the
+The split (``real_music/sources.toml``) was fixed before any tracker was run on these songs: the
 ``tuning`` part may be used to choose settings, the ``heldout`` part only to report them.
 """
 
@@ -60,8 +60,6 @@ SILENCE_DB = -40.0
 """Beats are kept from where the music is first louder than this, dB below the song's peak
 (50 ms RMS frames), to where it last is: there is nothing to hear before and after."""
 KINDS = ("recording", "midi_render")
-FOF_DIR = "usr/share/games/fretsonfire/data/songs"
-OPENMSX_DIR = "usr/share/games/openttd/baseset/openmsx"
 
 LICENCES = {
     "CC-BY-SA-3.0": "https://creativecommons.org/licenses/by-sa/3.0/",
@@ -88,100 +86,19 @@ class SongSource:
         return "midi_render" if self.path.endswith(".mid") else "recording"
 
 
-_MULDJORD = "fretsonfire-songs-muldjord"
-_SECTOID = "fretsonfire-songs-sectoid"
-_OPENMSX = "openttd-openmsx"
-_REDFARN = "Jim Redfarn (OpenMSX)"
-_EL_SENATOR = "Muldjord (El Senator)"
-_VIOLA = "Sectoid (Carlos Viola Iborra)"
-SONGS = (
-    SongSource(
-        "chaos_god", _MULDJORD, f"{FOF_DIR}/muldjord/chaos_god", "Chaos God", _EL_SENATOR,
-        "CC-BY-SA-3.0", "tuning", "metal, 170 BPM",
-    ),
-    SongSource(
-        "internal_degeneration", _MULDJORD, f"{FOF_DIR}/muldjord/internal_degeneration",
-        "Internal Degeneration", _EL_SENATOR, "CC-BY-SA-3.0", "tuning",
-        "metal, 190 BPM charted (95 BPM half time is as plausible a dance tempo)",
-    ),
-    SongSource(
-        "escape_from_chaosland", _SECTOID, f"{FOF_DIR}/sectoid/Escape from chaosland",
-        "Escape from chaosland", _VIOLA, "MIT", "tuning",
-        "rock, 135 BPM",
-    ),
-    SongSource(
-        "feelings", _SECTOID, f"{FOF_DIR}/sectoid/Feelings", "Feelings", _VIOLA,
-        "MIT", "heldout", "ballad rock, 95 BPM, the slowest song",
-    ),
-    SongSource(
-        "war_of_freedom", _SECTOID, f"{FOF_DIR}/sectoid/War of freedom", "War of freedom",
-        _VIOLA, "MIT", "heldout", "rock, 140 BPM",
-    ),
-    SongSource(
-        "metal_madness", _SECTOID, f"{FOF_DIR}/sectoid/Metal madness", "Metal madness",
-        _VIOLA, "MIT", "heldout",
-        "metal, 150 BPM, riffs accented off the beat",
-    ),
-    SongSource(
-        "armygeddon", _MULDJORD, f"{FOF_DIR}/muldjord/armygeddon", "Armygeddon", _EL_SENATOR,
-        "CC-BY-SA-3.0", "heldout", "metal, 170 BPM",
-    ),
-    SongSource(
-        "mutilated_mime", _MULDJORD, f"{FOF_DIR}/muldjord/mutilated_mime", "Mutilated Mime",
-        _EL_SENATOR, "CC-BY-SA-3.0", "heldout", "metal, 180 BPM",
-    ),
-    SongSource(
-        "midnight_snow_run", _OPENMSX, f"{OPENMSX_DIR}/midnight_snow_run.mid",
-        "Midnight Snow Run", "Tistou Blomberg (OpenMSX)", "GPL-2.0", "tuning",
-        "4/4, a tempo ramp from 120 BPM",
-    ),
-    SongSource(
-        "careless_love", _OPENMSX, f"{OPENMSX_DIR}/careless_perc_redfarn.mid", "Careless Love",
-        _REDFARN, "GPL-2.0", "tuning", "4/4, 64 BPM: slow, 128 BPM is as plausible",
-    ),
-    SongSource(
-        "keep_on_rolling", _OPENMSX, f"{OPENMSX_DIR}/keep_on_rolling.mid", "Keep on Rolling",
-        "-lucas- (OpenMSX)", "GPL-2.0", "tuning", "4/4, 104 BPM",
-    ),
-    SongSource(
-        "the_hobo", _OPENMSX, f"{OPENMSX_DIR}/the_hobo_redfarn.mid", "The Hobo", _REDFARN,
-        "GPL-2.0", "tuning", "6/4, 126 BPM",
-    ),
-    SongSource(
-        "boogie_marabi", _OPENMSX, f"{OPENMSX_DIR}/boogi_marabi_redfarn.mid", "Boogie Marabi",
-        _REDFARN, "GPL-2.0", "heldout", "3/4, 153 BPM",
-    ),
-    SongSource(
-        "be_sharp", _OPENMSX, f"{OPENMSX_DIR}/be_sharp_bw_redfarn.mid", "Be Sharp", _REDFARN,
-        "GPL-2.0", "heldout", "4/4, 109 BPM, a ritardando at the end",
-    ),
-    SongSource(
-        "train_filled_with_cash", _OPENMSX, f"{OPENMSX_DIR}/train_filled_with_cash.mid",
-        "Train filled with cash", "imuh3 (OpenMSX)", "GPL-2.0", "heldout", "4/4, 90 BPM",
-    ),
-    SongSource(
-        "chugga_chugga", _OPENMSX, f"{OPENMSX_DIR}/chuggachugga.mid",
-        "Chugga Chugga Cha-ching", "imuh3 (OpenMSX)", "GPL-2.0", "heldout",
-        "4/4, 180 BPM, slowing to 69 BPM at the end",
-    ),
-    SongSource(
-        "ttsong_iv", _OPENMSX, f"{OPENMSX_DIR}/ttsong_iv_imuh3.mid", "TT Song IV",
-        "imuh3 (OpenMSX)", "GPL-2.0", "heldout", "4/4, 80 BPM",
-    ),
-    SongSource(
-        "mosey_along", _OPENMSX, f"{OPENMSX_DIR}/mosey_along_redfarn.mid", "Mosey Along",
-        _REDFARN, "GPL-2.0", "heldout", "4/4, 140 BPM",
-    ),
-)  # fmt: skip
-SPLIT_REASON = (
-    "About 40 % for tuning, 60 % held out, chosen by tempo, meter and kind before any tracker "
-    "was run on a song. Recordings: 3 of 8 (10 of 27 minutes) for tuning; each part has both "
-    "bands, a song near 135-140 BPM and songs at 170 BPM and above; the held-out part keeps "
-    "the slow ballad (95 BPM) and the off-beat riffs (Metal madness), where a tracker most "
-    "often picks the wrong level or phase, so that they test rather than steer a change. MIDI "
-    "renders: 4 of 10 for tuning (a tempo ramp, 64 BPM, 104 BPM, 6/4); held out: 3/4, a "
-    "ritardando, a tempo change, 80, 90 and 140 BPM."
-)
+SOURCES_NAME = "sources.toml"
+"""Under ``ROOT``: each song's package, path, title, artist, licence, split and notes."""
+
+
+def read_sources(root: Path = ROOT) -> tuple[tuple[SongSource, ...], str]:
+    """The songs of ``sources.toml`` and the reason given for their split."""
+    import tomllib
+
+    with open(root / SOURCES_NAME, "rb") as f:
+        table = tomllib.load(f)
+    return tuple(SongSource(**song) for song in table["song"]), " ".join(
+        table["split_reason"].split()
+    )
 
 
 @dataclass
@@ -503,7 +420,8 @@ def _build_midi_render(src: SongSource, package_dir: Path, root: Path) -> dict[s
 def build(root: Path = ROOT, debs: dict[str, Path] | None = None) -> dict[str, Any]:
     """Download the Debian packages (unless ``debs`` gives their .deb files), write the audio,
     beat files and manifest under ``root``."""
-    packages = sorted({s.package for s in SONGS})
+    songs, split_reason = read_sources(root)
+    packages = sorted({s.package for s in songs})
     entries = []
     with tempfile.TemporaryDirectory(prefix="quaddance-real-") as tmp:
         tmp_dir = Path(tmp)
@@ -514,7 +432,7 @@ def build(root: Path = ROOT, debs: dict[str, Path] | None = None) -> dict[str, A
             subprocess.run(
                 ["dpkg-deb", "-x", str(debs[package]), str(tmp_dir / package)], check=True
             )
-        for src in SONGS:
+        for src in songs:
             build_song = _build_midi_render if src.kind == "midi_render" else _build_recording
             entry = build_song(src, tmp_dir / src.package, root)
             entry["source"] = {
@@ -531,7 +449,7 @@ def build(root: Path = ROOT, debs: dict[str, Path] | None = None) -> dict[str, A
         ),
         "built_by": f"python -m {__name__} build",
         "splits": {s: [e["name"] for e in entries if e["split"] == s] for s in SPLITS},
-        "split_reason": SPLIT_REASON,
+        "split_reason": split_reason,
         "licences": LICENCES,
         "songs": entries,
     }

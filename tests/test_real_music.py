@@ -12,11 +12,11 @@ from benchmarks.real_music import (
     KINDS,
     LICENCES,
     ROOT,
-    SONGS,
     SPLITS,
     grid_offset_s,
     load_manifest,
     load_songs,
+    read_sources,
     read_tempo_map,
 )
 
@@ -25,7 +25,7 @@ def test_manifest_loads_and_every_listed_file_exists() -> None:
     manifest = load_manifest()
     songs = load_songs()
     assert [s.name for s in songs] == [e["name"] for e in manifest["songs"]]
-    assert {e["name"] for e in manifest["songs"]} == {s.name for s in SONGS}
+    assert {e["name"] for e in manifest["songs"]} == {s.name for s in read_sources()[0]}
     for entry in manifest["songs"]:
         for key in ("audio", "beats", "downbeats", "licence_file"):
             assert (ROOT / entry[key]).is_file(), (entry["name"], key)
@@ -57,6 +57,8 @@ def test_splits_are_disjoint_and_cover_the_set() -> None:
     assert not parts["tuning"] & parts["heldout"]
     assert parts["tuning"] | parts["heldout"] == {e["name"] for e in manifest["songs"]}
     assert {k: set(v) for k, v in manifest["splits"].items()} == parts
+    # The manifest keeps the split that sources.toml fixed.
+    assert parts == {p: {s.name for s in read_sources()[0] if s.split == p} for p in SPLITS}
     # The held-out part is the larger (about 60 %), so its means say more.
     assert len(parts["heldout"]) > len(parts["tuning"])
 
