@@ -153,7 +153,9 @@ def bench_beats_cmd(
     Reports the strict F (+-70 ms) and the F at each tracker's own metrical level (same,
     double or half tempo), per set: "tuning" (tuned on), "random" and "untuned" (never tuned
     on). Needs fluidsynth and a General MIDI soundfont (apt-get install fluidsynth
-    fluid-soundfont-gm); renderings are cached under benchmarks/cache/.
+    fluid-soundfont-gm); renderings are cached under benchmarks/cache/. "real" scores the
+    real-music set (benchmarks/real_music: band recordings and MIDI songs made elsewhere,
+    tuning and held-out parts) offline, online (after the lock) and with librosa.
     """
     from rich.console import Console
     from rich.table import Table

@@ -48,6 +48,8 @@ from typing import Any
 
 import numpy as np
 
+MODULE = "benchmarks.real_music"
+"""This module's name, for the commands it prints (``__name__`` is ``__main__`` under -m)."""
 ROOT = Path(__file__).resolve().parent / "real_music"
 """The set's folder: ``manifest.json``, ``audio/``, ``beats/``, ``LICENCES.md``."""
 MANIFEST_NAME = "manifest.json"
@@ -130,9 +132,7 @@ def load_manifest(root: Path = ROOT) -> dict[str, Any]:
     """The manifest of the set under ``root`` (``build`` writes it)."""
     path = root / MANIFEST_NAME
     if not path.is_file():
-        raise FileNotFoundError(
-            f"no real-music manifest at {path}: run `python -m {__name__} build`"
-        )
+        raise FileNotFoundError(f"no real-music manifest at {path}: run `python -m {MODULE} build`")
     return json.loads(path.read_text())
 
 
@@ -447,7 +447,7 @@ def build(root: Path = ROOT, debs: dict[str, Path] | None = None) -> dict[str, A
             "Fire song packs of Debian, band and guitar stems mixed to mono, beats from each "
             "chart's tempo map) and MIDI songs (OpenTTD's OpenMSX set, rendered with fluidsynth)"
         ),
-        "built_by": f"python -m {__name__} build",
+        "built_by": f"python -m {MODULE} build",
         "splits": {s: [e["name"] for e in entries if e["split"] == s] for s in SPLITS},
         "split_reason": split_reason,
         "licences": LICENCES,
@@ -678,7 +678,7 @@ def run_real_bench(
             "tracker's own metrical level (same, double or half tempo reference); online "
             "scores count the beats after the first lock (lock_s); downbeat F strict"
         ),
-        "command": f"python -m {__name__} bench",
+        "command": "quaddance bench beats --sets real",
         "madmom_python": madmom_python,
         # Per split, and per split and kind: the recordings are the harder, truer test.
         "means": {
@@ -698,9 +698,7 @@ def run_real_bench(
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(
-        prog=f"python -m {__name__}", description=__doc__.split("\n")[0]
-    )
+    parser = argparse.ArgumentParser(prog=f"python -m {MODULE}", description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     b = sub.add_parser("build", help="download the Debian packages; write audio, beats, manifest")
     b.add_argument("--deb", nargs="*", type=Path, default=None, help="the .deb files, if at hand")
@@ -721,7 +719,7 @@ def main(argv: list[str] | None = None) -> None:
 
         rows = [check_song(s, args.clicks_dir) for s in load_songs()]
         write_json(args.out, {"benchmark": "real_music_check", "command":
-                              f"python -m {__name__} check", "songs": rows})  # fmt: skip
+                              f"python -m {MODULE} check", "songs": rows})  # fmt: skip
         for row in rows:
             print(row["name"], row["whole"], row["second_half"], row["control_half_beat_late"])
     else:
