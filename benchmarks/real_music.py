@@ -205,13 +205,12 @@ class TempoMap:
 
     def beat_times_s(self, end_s: float) -> np.ndarray:
         """Times of the chart's beats (tick 0, then every ``ticks_per_beat``) up to ``end_s``."""
-        times, t_s, tick, k = [], 0.0, 0, 0
+        times, t_s, tick = [], 0.0, 0
         while t_s <= end_s:
             times.append(t_s)
-            nxt = tick + self.ticks_per_beat
             # Integrate seconds per tick across tempo changes inside this beat.
-            t_s += self._seconds(tick, nxt)
-            tick, k = nxt, k + 1
+            t_s += self._seconds(tick, tick + self.ticks_per_beat)
+            tick += self.ticks_per_beat
         return np.array(times)
 
     def _seconds(self, a: int, b: int) -> float:
@@ -236,11 +235,12 @@ def read_tempo_map(midi_path: Path) -> TempoMap:
         for msg in track:
             tick += msg.time
             if msg.type == "set_tempo":
+                # A MIDI file stores whole microseconds per beat (170 BPM is 170.000085);
+                # the sequencer that made the song played the round figure.
                 tempos[tick] = round(float(mido.tempo2bpm(msg.tempo)), 3)
             elif msg.type == "time_signature" and tick == 0:
                 beats_per_bar = msg.numerator * 4 // msg.denominator
-    if not tempos:
-        tempos[0] = 120.0
+    tempos.setdefault(0, 120.0)  # MIDI's tempo until the first tempo event
     ticks = tuple(sorted(tempos))
     return TempoMap(midi.ticks_per_beat, ticks, tuple(tempos[t] for t in ticks), beats_per_bar)
 
