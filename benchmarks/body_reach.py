@@ -87,7 +87,7 @@ def _run(trials: list[tuple[int, float]], paw_up: bool, policy=None) -> list[dic
             slide = (r.foot_pos_w[:, down, :2] - feet0[:, down]).norm(dim=2).amax(dim=1)
             slid = torch.maximum(slid, slide)
             pose += torch.cat(
-                [(r.base_pos_w[:, 2] - cfg.rewards.base_height_target_m)[:, None], r.base_rpy_rad],
+                [(r.base_pos_w[:, 2] - cfg.base_height_target_m)[:, None], r.base_rpy_rad],
                 dim=1,
             )
     pose /= n_hold

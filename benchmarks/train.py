@@ -27,10 +27,10 @@ def _bench_bank() -> np.ndarray:
 
 def env_only(engine: str, num_envs: int, steps: int) -> float:
     """Env steps/s of the dance task with random actions (physics + task code)."""
-    from quaddance.sim.config import DanceTaskCfg
+    from quaddance.sim import tasks
     from quaddance.sim.task import DanceEnv
 
-    env = DanceEnv(DanceTaskCfg(num_envs=num_envs), _bench_bank(), engine=engine)
+    env = DanceEnv(tasks.paws_only(num_envs=num_envs), _bench_bank(), engine=engine)
     actions = torch.zeros(num_envs, 12, device=env.device)
     for _ in range(3):  # warm-up (kernel compilation, thread pools)
         env.step(actions)
@@ -44,10 +44,12 @@ def env_only(engine: str, num_envs: int, steps: int) -> float:
 
 def end_to_end(engine: str, preset: str, num_envs: int, iterations: int) -> dict[str, float]:
     """PPO env steps/s (collection + learning), after one warm-up iteration."""
+    from quaddance.sim import tasks
     from quaddance.train import TrainCfg, Trainer
 
     with tempfile.TemporaryDirectory() as tmp:
-        cfg = TrainCfg(run_dir=Path(tmp), engine=engine, preset=preset, num_envs=num_envs)
+        task = tasks.paws_only(num_envs=num_envs)
+        cfg = TrainCfg(run_dir=Path(tmp), engine=engine, preset=preset, task=task)
         trainer = Trainer(cfg, bank=_bench_bank(), log=lambda *a: None)
         trainer.learn(1, progress=False)
         rows = trainer.learn(iterations, progress=False)

@@ -31,10 +31,10 @@ def short_song(tmp_path_factory) -> Path:
 
 def test_shipped_policy_loads_and_matches_the_task():
     policy = OnnxPolicy.load(shipped_policy_path())
-    from quaddance.sim.observations import ActorObservation, observation_layout
+    from quaddance.sim.observations import ActorObservation
 
-    layout = observation_layout(ActorObservation(policy.task, 1), policy.task.obs.privileged_critic)
-    assert layout["actor_dim"] == policy.obs_dim
+    layout = ActorObservation(policy.task, 1).layout
+    assert sum(s.size for s in layout) == policy.obs_dim
     actions = policy.act(np.zeros((1, policy.obs_dim), np.float32))
     assert actions.shape == (1, 12) and np.isfinite(actions).all()
 

@@ -553,18 +553,68 @@ def _shipped_json() -> tuple[Path, dict]:
     return path, json.loads(path.read_text())
 
 
-def test_shipped_policy_json_round_trips_unchanged() -> None:
+def _shipped_json_v2() -> dict:
+    """The shipped policy's JSON in the current format: its task's reward terms as entries."""
+    import json
+
     from quaddance.play.policy_spec import FORMAT, PolicySpec
+    from quaddance.sim.config import task_record
+
+    path, meta = _shipped_json()
+    task = task_record(PolicySpec.load(path).task_cfg)
+    return dict(meta, format=FORMAT, task=json.loads(json.dumps(task)))
+
+
+def test_shipped_policy_json_round_trips_unchanged() -> None:
+    from quaddance.play.policy_spec import FLAT_REWARDS_FORMAT, PolicySpec
+    from quaddance.sim import tasks
 
     path, _ = _shipped_json()
     spec = PolicySpec.load(path)
     # The shipped policy is the whole-body dancer: 192 paw inputs + 16 body-target inputs +
     # the heading error.
-    assert spec.format == FORMAT and spec.obs_dim == 209 and spec.task_cfg.obs.history_len == 3
+    assert spec.format == FLAT_REWARDS_FORMAT and spec.obs_dim == 209
+    assert spec.task_cfg.obs.history_len == 3
     assert spec.task_cfg.whole_body and spec.task_cfg.obs.heading
     assert spec.obs_layout[-1].name == "heading_error_rad"
     assert spec.to_json() == path.read_text()  # byte for byte
     assert PolicySpec.from_json(spec.to_json()) == spec
+    # Its flat reward weights are the whole-body task's reward terms, curriculum included.
+    want = tasks.whole_body()
+    assert spec.task_cfg.rewards == want.rewards
+    assert spec.task_cfg.base_height_target_m == want.base_height_target_m
+
+
+def test_policy_json_with_reward_terms_round_trips(tmp_path) -> None:
+    import json
+
+    from quaddance.play.policy_spec import FORMAT, PolicySpec
+
+    path, _ = _shipped_json()
+    new = tmp_path / "policy.json"
+    new.write_text(json.dumps(_shipped_json_v2(), indent=2) + "\n")
+    spec = PolicySpec.load(new)
+    assert spec.format == FORMAT and spec.task_cfg == PolicySpec.load(path).task_cfg
+    assert spec.to_json() == new.read_text()
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "words"),
+    [
+        ("task.rewards.torques.fn", "open", "task.rewards.torques.fn: 'open' is not a reward"),
+        ("task.rewards.torques.fn", "TrackingErrors", "'TrackingErrors' is not a reward"),
+        ("task.rewards.torques.weight", "-1", "task.rewards.torques.weight: must be a number"),
+        ("task.rewards.torques.per_step", 1, "task.rewards.torques.per_step: must be true or"),
+        ("task.rewards.torques.scale", 1, "task.rewards.torques: unknown field 'scale'"),
+        ("task.rewards.termination.params", [], "termination.params: must be a JSON object"),
+        ("task.rewards.front_tracking.params.c", 1.0, "front_tracking's parameters: got an"),
+        ("task.rewards.form", "paper", "task.rewards.form: must be a JSON object"),
+        ("task.curriculum_env_steps", [5, 2], "the range's low end is above its high end"),
+    ],
+)
+def test_policy_json_reward_terms_are_checked(tmp_path, field, value, words) -> None:
+    message = _refused(tmp_path, _shipped_json_v2(), field, value)
+    assert words in message, message
 
 
 def _set(meta: dict, dotted: str, value) -> None:
@@ -580,7 +630,7 @@ def _set(meta: dict, dotted: str, value) -> None:
 @pytest.mark.parametrize(
     ("field", "value", "words"),
     [
-        ("format", "quaddance-policy/2", "format: 'quaddance-policy/2' is not a policy format"),
+        ("format", "quaddance-policy/3", "format: 'quaddance-policy/3' is not a policy format"),
         ("kp", float("nan"), "kp: nan is not a finite number"),
         ("kp", 10**400, "kp: 1000000000"),
         ("kd", True, "kd: must be a number, got true/false"),
@@ -614,18 +664,24 @@ def _set(meta: dict, dotted: str, value) -> None:
     ],
 )
 def test_policy_json_fields_are_checked(tmp_path, field, value, words) -> None:
+    message = _refused(tmp_path, _shipped_json()[1], field, value)
+    assert words in message, message
+
+
+def _refused(tmp_path, meta: dict, field: str, value) -> str:
+    """The one-line error that loading ``meta`` with ``field`` set to ``value`` raises."""
     import json
 
     from quaddance.play.policy_spec import PolicySpec
 
-    _, meta = _shipped_json()
     _set(meta, field, value)
     path = tmp_path / "policy.json"
     path.write_text(json.dumps(meta))
     with pytest.raises(InputFileError) as err:
         PolicySpec.load(path)
     message = str(err.value)
-    assert message.startswith(f"{path}: ") and words in message and len(message) < 300, message
+    assert message.startswith(f"{path}: ") and len(message) < 300, message
+    return message
 
 
 @pytest.mark.parametrize(

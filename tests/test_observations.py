@@ -6,17 +6,19 @@ import copy
 
 import mujoco
 import numpy as np
+import pytest
 import torch
 
 from quaddance.robots import GO1
-from quaddance.sim.config import DanceTaskCfg
+from quaddance.sim import tasks
+from quaddance.sim.config import SOURCES, DanceTaskCfg
 from quaddance.sim.kinematics import estimate_foot_height_m, foot_pos_b, leg_geometry
 from quaddance.sim.observations import (
-    PROPRIO_DIM,
     PROPRIO_TERMS,
-    SOURCES,
     ActorObservation,
     Measurement,
+    ObsLayout,
+    dance_terms,
 )
 from quaddance.sim.scene import SceneCfg, build_model
 from quaddance.sim.task import DanceEnv
@@ -100,10 +102,60 @@ def test_foot_height_estimate_tracks_the_truth_while_the_policy_dances():
 
 def test_actor_terms_come_only_from_robot_sensors():
     assert all(t.source in SOURCES for t in PROPRIO_TERMS)
-    layout = ActorObservation(nominal_cfg(1), 1).layout()
-    assert sum(t["size"] for t in layout) == PROPRIO_DIM * 4 + 2 + 6
-    for term in layout:
-        assert all(part in SOURCES for part in term["source"].split("+")), term
+    ob = ActorObservation(nominal_cfg(1), 1)
+    assert ob.proprio_dim == 46
+    assert sum(t.size for t in ob.layout) == ob.proprio_dim * 4 + 2 + 6
+    for term in ob.layout:
+        assert all(part in SOURCES for part in term.source.split("+")), term
+
+
+@pytest.mark.parametrize("variant", ["paws-only", "whole-body"])
+def test_the_layout_read_off_the_term_tables_is_what_the_builder_concatenates(variant):
+    """Each slice of the layout holds its term's values, in order, for both task variants;
+    the critic adds the privileged terms after the actor's."""
+    cfg = tasks.TASKS[variant](num_envs=2)
+    cfg.domain_rand.enabled = False
+    bank = np.random.default_rng(0).uniform(0.0, 0.1, (1, 60, 8)).astype(np.float32)
+    env = DanceEnv(cfg, bank if cfg.whole_body else bank[..., :4], random_start=False)
+    for _ in range(3):
+        obs = env.step(torch.rand(2, 12) - 0.5)[0]
+    layout = env.obs_layout
+    assert obs["actor"].shape[1] == layout.actor_dim
+    assert obs["critic"].shape[1] == layout.critic_dim
+    ob = env.actor_obs
+    start = 0
+    columns = {}
+    for s in layout.critic:
+        columns[s.name] = obs["critic"][:, start : start + s.size]
+        start += s.size
+    names = [s.name for s in layout.actor]
+    n_proprio = len(PROPRIO_TERMS)
+    assert names[:n_proprio] == [f"proprio.{t.name}" for t in PROPRIO_TERMS]
+    for t in PROPRIO_TERMS:
+        torch.testing.assert_close(columns[f"proprio.{t.name}"], t.fn(ob))
+    dance = dance_terms(cfg)
+    assert names[n_proprio + ob.history_len :] == [t.name for t in dance]
+    assert ("heading_error_rad" in names) == cfg.whole_body
+    for t in dance:
+        torch.testing.assert_close(columns[t.name], t.fn(ob))
+    privileged = [s.name for s in layout.critic[len(layout.actor) :]]
+    assert privileged == [
+        "privileged.dynamics",
+        "privileged.base_lin_vel_b",
+        "privileged.base_height_m",
+    ]
+    torch.testing.assert_close(columns["privileged.base_height_m"], env.robot.base_pos_w[:, 2:3])
+    # The training log's column names are the layout's, one per column.
+    names = layout.column_names()
+    assert len(names["actor"]) == layout.actor_dim and len(names["critic"]) == layout.critic_dim
+    assert names["critic"][-1] == "privileged.base_height_m[0]"
+
+
+def test_a_critic_without_privileged_terms_sees_what_the_actor_sees():
+    actor = ActorObservation(nominal_cfg(1), 1).layout
+    assert ObsLayout.of(actor, (), privileged_critic=True).critic == actor
+    env = DanceEnv(nominal_cfg(1), np.zeros((1, 60, 4), np.float32))
+    assert ObsLayout.of(actor, env.privileged_slices, privileged_critic=False).critic == actor
 
 
 def test_one_robot_builder_reproduces_the_training_observation():

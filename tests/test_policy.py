@@ -16,6 +16,7 @@ from quaddance.errors import InputFileError, QuaddanceError
 from quaddance.play.policy import OnnxPolicy
 from quaddance.play.rollout import rollout
 from quaddance.robots import GO1
+from quaddance.sim import tasks
 from quaddance.train import TrainCfg, Trainer
 
 FPS = 50.0
@@ -24,7 +25,7 @@ FPS = 50.0
 @pytest.fixture(scope="module")
 def trainer(tmp_path_factory) -> Trainer:
     run_dir = tmp_path_factory.mktemp("run")
-    cfg = TrainCfg(run_dir=run_dir, num_envs=2, iterations=0, preset="cpu")
+    cfg = TrainCfg(run_dir=run_dir, iterations=0, preset="cpu", task=tasks.paws_only(num_envs=2))
     return Trainer(cfg, bank=np.zeros((1, 1100, 4), np.float32), log=lambda *a: None)
 
 

@@ -17,8 +17,8 @@ import torch
 
 from quaddance.errors import QuaddanceError
 from quaddance.robots import GO1, ROBOTS, RobotCfg, get_robot
+from quaddance.sim import tasks
 from quaddance.sim.body import BodyFeedforward, leg_ik, rpy_matrix
-from quaddance.sim.config import DanceTaskCfg
 from quaddance.sim.feedforward import lift_table
 from quaddance.sim.kinematics import foot_pos_b, leg_geometry
 from quaddance.sim.scene import SceneCfg, build_model
@@ -129,10 +129,10 @@ def test_front_lift_table_follows_the_longer_calves(long_calves):
 
 
 def test_the_task_runs_the_second_robot(long_calves):
-    cfg = DanceTaskCfg(num_envs=2, scene=SceneCfg(robot=long_calves))
+    cfg = tasks.paws_only(num_envs=2, robot=long_calves)
     cfg.domain_rand.enabled = False
     assert cfg.scene.kp == long_calves.kp
-    assert cfg.rewards.base_height_target_m == long_calves.standing_height_m
+    assert cfg.base_height_target_m == long_calves.standing_height_m
     bank = np.zeros((1, 100, 4), np.float32)
     bank[0, :, 0] = 0.1
     env = DanceEnv(cfg, bank, seed=0, random_start=False)

@@ -13,8 +13,8 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from quaddance.robots import GO1
-from quaddance.sim import rewards, terminations
-from quaddance.sim.config import DanceTaskCfg, RewardCfg
+from quaddance.sim import rewards, tasks, terminations
+from quaddance.sim.config import DanceTaskCfg, RewardTerm
 from quaddance.sim.engines import CpuEngine, apply_dynamics
 from quaddance.sim.kinematics import estimate_foot_height_m, leg_geometry
 from quaddance.sim.scene import SceneCfg, build_model
@@ -28,8 +28,10 @@ FL, FR, RL, RR = 0, 1, 2, 3
 
 
 def task_cfg(num_envs: int, **kwargs) -> DanceTaskCfg:
-    """The task without domain randomisation (nominal robot, no pushes, no lag)."""
-    cfg = DanceTaskCfg(num_envs=num_envs, **kwargs)
+    """The paws-only task without domain randomisation (nominal robot, no pushes, no lag)."""
+    cfg = tasks.paws_only(num_envs=num_envs)
+    for key, value in kwargs.items():
+        setattr(cfg, key, value)
     cfg.domain_rand.enabled = False
     return cfg
 
@@ -170,11 +172,11 @@ def test_front_leg_command_lifts_that_foot_only():
     assert h[1, [FL, RL, RR]].abs().max() < 0.01
 
 
-def layout_slices(items: list[dict]) -> dict[str, slice]:
+def layout_slices(items) -> dict[str, slice]:
     out, start = {}, 0
     for item in items:
-        out[item["name"]] = slice(start, start + item["size"])
-        start += item["size"]
+        out[item.name] = slice(start, start + item.size)
+        start += item.size
     return out
 
 
@@ -184,14 +186,14 @@ def test_observation_layout_names_what_the_policy_sees():
     bank[0, :, FR] = 1.0 - np.arange(40) * 0.01
     env = DanceEnv(task_cfg(2), bank, random_start=False)
     layout = env.obs_layout
-    actor, critic = layout_slices(layout["actor"]), layout_slices(layout["critic"])
+    actor, critic = layout_slices(layout.actor), layout_slices(layout.critic)
     before = env.get_observations()["actor"]
     proprio_before = before[:, : actor["proprio.foot_height_m"].stop]
     for _ in range(3):
         obs = env.step(torch.zeros(2, 12))[0]
     a, c = obs["actor"], obs["critic"]
-    assert a.shape == (2, layout["actor_dim"]) and c.shape == (2, layout["critic_dim"])
-    torch.testing.assert_close(c[:, : layout["actor_dim"]], a)
+    assert a.shape == (2, layout.actor_dim) and c.shape == (2, layout.critic_dim)
+    torch.testing.assert_close(c[:, : layout.actor_dim], a)
     # Targets now (step 3) and 0.1, 0.2, 0.4 s ahead (steps 8, 13, 23), FL then FR.
     now = torch.tensor(bank[0, 3, :2]).repeat(2, 1)
     torch.testing.assert_close(a[:, actor["front_targets_now_m"]], now)
@@ -222,40 +224,42 @@ def test_observation_layout_names_what_the_policy_sees():
 # --- rewards --------------------------------------------------------------------------------
 
 
-def fake_env(feet_m: list[list[float]], targets_m: list[list[float]], cfg: RewardCfg):
-    """What the reward terms read: the robot's foot heights, the targets and the weights."""
+def fake_env(feet_m: list[list[float]], targets_m: list[list[float]]) -> SimpleNamespace:
+    """What the reward terms read: the robot's foot heights and the targets."""
     feet = torch.tensor(feet_m, dtype=torch.float64)
     targets = torch.tensor(targets_m, dtype=torch.float64)
-    return SimpleNamespace(
-        robot=SimpleNamespace(foot_height_m=feet),
-        targets_at=lambda k: targets,
-        cfg=SimpleNamespace(rewards=cfg),
-    )
+    env = SimpleNamespace(robot=SimpleNamespace(foot_height_m=feet), targets_at=lambda k: targets)
+    env.errors = rewards.TrackingErrors(env)
+    return env
+
+
+def reward_of(term: RewardTerm, env) -> torch.Tensor:
+    """A term's value with its weight (before the policy step)."""
+    return term.weight * term.fn(env, **term.params)
 
 
 def test_eq2_is_zero_when_the_front_feet_are_on_target():
     env = fake_env(
         [[0.12, 0.05, 0.0, 0.0], [0.0, 0.0, 0.03, 0.0]],
         [[0.12, 0.05, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0]],
-        RewardCfg(),
     )
     # Rear-foot errors are eq. 3's business, not eq. 2's.
-    assert rewards.front_tracking(env).tolist() == [0.0, 0.0]
+    assert reward_of(tasks.front_tracking(), env).tolist() == [0.0, 0.0]
 
 
 def test_eq2_value_for_a_hand_set_state():
-    cfg = RewardCfg()
-    env = fake_env([[0.10, 0.00, 0.02, 0.0]], [[0.15, 0.08, 0.0, 0.0]], cfg)
+    env = fake_env([[0.10, 0.00, 0.02, 0.0]], [[0.15, 0.08, 0.0, 0.0]])
     expected = 30.0 * (math.exp(-10.0 * 0.05) - 1) + 30.0 * (math.exp(-10.0 * 0.08) - 1)
-    assert rewards.front_tracking(env).item() == pytest.approx(expected, rel=1e-9)
+    assert reward_of(tasks.front_tracking(), env).item() == pytest.approx(expected, rel=1e-9)
     # Overshooting by the same amount costs the same (|e|).
-    env = fake_env([[0.20, 0.16, 0.0, 0.0]], [[0.15, 0.08, 0.0, 0.0]], cfg)
-    assert rewards.front_tracking(env).item() == pytest.approx(expected, rel=1e-9)
+    env = fake_env([[0.20, 0.16, 0.0, 0.0]], [[0.15, 0.08, 0.0, 0.0]])
+    assert reward_of(tasks.front_tracking(), env).item() == pytest.approx(expected, rel=1e-9)
 
 
 def test_l2_form_is_minus_c_times_squared_error():
-    env = fake_env([[0.10, 0.00, 0.0, 0.0]], [[0.15, 0.08, 0.0, 0.0]], RewardCfg.named("l2"))
-    assert rewards.front_tracking(env).item() == pytest.approx(-30.0 * (0.05**2 + 0.08**2))
+    env = fake_env([[0.10, 0.00, 0.0, 0.0]], [[0.15, 0.08, 0.0, 0.0]])
+    value = reward_of(tasks.front_tracking("l2"), env).item()
+    assert value == pytest.approx(-30.0 * (0.05**2 + 0.08**2))
 
 
 def test_foot_slide_is_the_speed_of_the_feet_on_the_ground():
@@ -281,19 +285,20 @@ def test_foot_slide_is_the_speed_of_the_feet_on_the_ground():
     ],
 )
 def test_named_reward_sets_follow_table1(name, c_f, lambda_f):
-    cfg = RewardCfg.named(name)
-    assert (cfg.form, cfg.c_f, cfg.lambda_f) == ("paper", c_f, lambda_f)
+    term = tasks.front_tracking(name)
+    assert (term.fn, term.weight) == (rewards.front_tracking, 1.0)
+    assert term.params == {"c_f": c_f, "lambda_f": lambda_f}
 
 
 def test_named_reward_l2_and_unknown_names():
-    assert RewardCfg.named("l2").form == "l2"
+    assert tasks.front_tracking("l2").fn is rewards.front_tracking_l2
     with pytest.raises(ValueError, match="table1-6"):
-        RewardCfg.named("table1-6")
+        tasks.front_tracking("table1-6")
 
 
 def test_eq3_rear_lift_penalty():
-    env = fake_env([[0.0, 0.0, 0.02, 0.03], [0.1, 0.1, -0.002, 0.0]], [[0.0] * 4] * 2, RewardCfg())
-    r = rewards.rear_lift(env)
+    env = fake_env([[0.0, 0.0, 0.02, 0.03], [0.1, 0.1, -0.002, 0.0]], [[0.0] * 4] * 2)
+    r = reward_of(tasks.dance_rewards()["rear_lift"], env)
     assert r[0].item() == pytest.approx(-30.0 * (0.02**2 + 0.03**2))
     assert r[1].item() == 0.0  # front lifts and feet pressed into the floor cost nothing
     assert rewards.rear_lift_l1(env).tolist() == pytest.approx([0.05, 0.0])
@@ -304,12 +309,31 @@ def test_env_pays_eq2_times_the_policy_step():
     bank[0, :, FL] = 0.08
     env = DanceEnv(task_cfg(2), bank)
     _, reward, _, extras = env.step(torch.zeros(2, 12))
-    expected = rewards.front_tracking(env) / POLICY_HZ
+    expected = reward_of(env.cfg.rewards["front_tracking"], env) / POLICY_HZ
     assert extras["log"]["/reward/front_tracking"].item() == pytest.approx(
         expected.mean().item(), rel=1e-5
     )
     assert expected.max().item() < -0.5 / POLICY_HZ  # the lifted target is missed: a cost
     assert torch.all(reward < 0)
+
+
+def test_a_reward_terms_weight_scales_its_share_of_the_reward():
+    bank = np.zeros((1, 200, 4), np.float32)
+    bank[0, :, FL] = 0.08
+    cfg = task_cfg(2)
+    tripled = task_cfg(2)
+    tripled.rewards["front_tracking"].weight *= 3.0
+    env, env3 = DanceEnv(cfg, bank), DanceEnv(tripled, bank)
+    _, reward, _, extras = env.step(torch.zeros(2, 12))
+    _, reward3, _, extras3 = env3.step(torch.zeros(2, 12))
+    share = reward_of(cfg.rewards["front_tracking"], env) / POLICY_HZ
+    assert share.max().item() < -0.01
+    torch.testing.assert_close(reward3 - reward, 2.0 * share)
+    log, log3 = extras["log"], extras3["log"]
+    assert log3["/reward/front_tracking"].item() == pytest.approx(
+        3.0 * log["/reward/front_tracking"].item(), rel=1e-6
+    )
+    assert log3["/reward/rear_lift"] == log["/reward/rear_lift"]
 
 
 # --- terminations ---------------------------------------------------------------------------
@@ -328,7 +352,8 @@ def test_upside_down_and_low_bases_fall():
     assert done.tolist() == [False, True, True]
     assert not extras["time_outs"].any()
     assert extras["log"]["/metrics/falls"].item() == 2
-    assert torch.all(reward[1:] <= RewardCfg().termination)
+    assert torch.all(reward[1:] <= env.cfg.rewards["termination"].weight)
+    assert extras["log"]["/reward/termination"].item() == pytest.approx(-200.0 * 2 / 3)
     # The fallen envs start again standing.
     assert env.episode_length_buf.tolist() == [1, 0, 0]
     np.testing.assert_allclose(env.robot.base_pos_w[1:, 2].numpy(), GO1.init_base_height_m)

@@ -19,7 +19,9 @@ from typer.testing import CliRunner
 
 from quaddance.cli import app, main
 from quaddance.errors import InputFileError
+from quaddance.play.policy_spec import PolicySpec
 from quaddance.robots import GO1
+from quaddance.sim import tasks
 from quaddance.train import TrainCfg, Trainer, build_bank
 
 NUM_ENVS = 8
@@ -35,8 +37,9 @@ def small_bank() -> np.ndarray:
     return bank
 
 
-def make_cfg(run_dir, **kwargs) -> TrainCfg:
-    return TrainCfg(run_dir=run_dir, num_envs=NUM_ENVS, preset="cpu", bank_size=2, **kwargs)
+def make_cfg(run_dir, reward_set: str = "paper", **kwargs) -> TrainCfg:
+    task = tasks.paws_only(reward_set, num_envs=NUM_ENVS)
+    return TrainCfg(run_dir=run_dir, preset="cpu", bank_size=2, task=task, **kwargs)
 
 
 def actor_state(trainer: Trainer) -> dict[str, torch.Tensor]:
@@ -60,7 +63,7 @@ class TrainedRun:
 def trained(tmp_path_factory) -> TrainedRun:
     """A trainer after 2 PPO iterations with Table 1's third reward set, exported."""
     run_dir = tmp_path_factory.mktemp("run")
-    cfg = make_cfg(run_dir, iterations=2, reward="table1-3")
+    cfg = make_cfg(run_dir, "table1-3", iterations=2)
     trainer = Trainer(cfg, bank=small_bank(), log=lambda *a: None)
     initial = actor_state(trainer)
     rows = trainer.learn(2, progress=False)
@@ -92,7 +95,7 @@ def test_two_iterations_learn_and_log_a_curve(trained):
 def test_resume_restores_counters_weights_and_appends_to_the_curve(trained, tmp_path):
     run_dir = tmp_path / "run"
     shutil.copytree(trained.run_dir, run_dir)
-    cfg = make_cfg(run_dir, resume=True, reward="table1-3")
+    cfg = make_cfg(run_dir, "table1-3", resume=True)
     resumed = Trainer(cfg, bank=small_bank(), log=lambda *a: None)
     assert (resumed.iteration, resumed.env_steps) == (2, trained.trainer.env_steps)
     assert resumed.wall_s == pytest.approx(trained.trainer.wall_s)
@@ -131,9 +134,11 @@ def test_onnx_export_equals_the_deterministic_torch_policy(trained):
 def test_policy_json_describes_the_policy(trained):
     meta = json.loads(trained.json_path.read_text())
     env = trained.trainer.env
-    dim = env.obs_layout["actor_dim"]
+    dim = env.obs_layout.actor_dim
     assert meta["obs"]["dim"] == dim == env.get_observations()["actor"].shape[1]
-    assert sum(item["size"] for item in meta["obs"]["terms"]) == dim
+    assert [(t["name"], t["size"]) for t in meta["obs"]["terms"]] == [
+        (t.name, t.size) for t in env.obs_layout.actor
+    ]
     # Every actor term names the robot sensor it comes from: nothing privileged.
     assert {t["source"] for t in meta["obs"]["terms"]} <= {
         "imu",
@@ -152,13 +157,23 @@ def test_policy_json_describes_the_policy(trained):
     assert (meta["policy_hz"], meta["decimation"], meta["sim_dt_s"]) == (50.0, 4, 0.005)
     assert meta["training"]["iterations"] == 2
     assert meta["training"]["num_envs"] == NUM_ENVS
-    assert meta["training"]["reward"] == "table1-3"
 
 
 def test_policy_json_task_is_the_task_that_was_trained(trained):
     task = json.loads(trained.json_path.read_text())["task"]
-    assert (task["rewards"]["c_f"], task["rewards"]["lambda_f"]) == (60.0, 100.0)
+    front = task["rewards"]["front_tracking"]
+    assert front == {
+        "fn": "front_tracking",
+        "weight": 1.0,
+        "params": {"c_f": 60.0, "lambda_f": 100.0},
+        "curriculum": False,
+        "per_step": True,
+    }
+    assert list(task["rewards"]) == list(trained.trainer.cfg.task.rewards)
     assert task["num_envs"] == NUM_ENVS
+    # The JSON's task is the trained one, reward terms included.
+    spec = PolicySpec.load(trained.json_path)
+    assert spec.task_cfg == trained.trainer.cfg.task
 
 
 # --- resume errors --------------------------------------------------------------------------
@@ -214,6 +229,43 @@ def test_resume_with_another_task_points_to_init_from(trained, tmp_path):
     with pytest.raises(InputFileError, match="--init-from") as info:
         Trainer(cfg, bank=small_bank(), log=lambda *a: None)
     assert "checkpoint.pt" in str(info.value)
+
+
+def test_init_from_an_older_checkpoint_carries_the_shared_inputs_over(trained, tmp_path):
+    """A paws-only checkpoint whose config holds the flat reward weights of older versions
+    starts a whole-body run: shared input columns keep their weights, new ones start at 0."""
+    state = torch.load(trained.run_dir / "checkpoint.pt", weights_only=True)
+    config = json.loads(state["config_json"])
+    for key in ("base_height_target_m", "curriculum_env_steps"):  # newer than those configs
+        del config["task"][key]
+    config["task"]["rewards"] = {"c_f": 60.0, "lambda_f": 100.0, "curriculum_terms": ["foot_slide"]}
+    state["config_json"] = json.dumps(config)
+    old = tmp_path / "old.pt"
+    torch.save(state, old)
+    task = tasks.whole_body(num_envs=NUM_ENVS, curriculum_env_steps=None)
+    cfg = TrainCfg(run_dir=tmp_path / "run", bank_size=2, task=task, init_from=old)
+    bank = np.concatenate([small_bank(), np.zeros_like(small_bank())], axis=2)
+    logs = []
+    trainer = Trainer(cfg, bank=bank, log=logs.append)
+    old_cols = trained.trainer.env.obs_layout.column_names()["actor"]
+    new_cols = trainer.env.obs_layout.column_names()["actor"]
+    assert len(new_cols) == len(old_cols) + 4 + 12 + 1
+    old_w = state["actor_state_dict"]["mlp.0.weight"]
+    new_w = trainer.alg.save()["actor_state_dict"]["mlp.0.weight"]
+    for j, name in enumerate(new_cols):
+        want = old_w[:, old_cols.index(name)] if name in old_cols else torch.zeros(len(new_w))
+        torch.testing.assert_close(new_w[:, j], want)
+    assert f"{len(old_cols)} of {len(new_cols)} actor inputs carried over" in logs[-1]
+
+
+def test_a_task_without_reward_terms_is_refused(tmp_path):
+    from quaddance.errors import QuaddanceError
+    from quaddance.sim.config import DanceTaskCfg
+
+    cfg = TrainCfg(run_dir=tmp_path / "run", task=DanceTaskCfg(whole_body=True, num_envs=2))
+    with pytest.raises(QuaddanceError, match=r"no reward terms.*paws-only, whole-body"):
+        Trainer(cfg, bank=small_bank(), log=lambda *a: None)
+    assert not (tmp_path / "run").exists()
 
 
 def test_build_bank_makes_and_caches_front_foot_targets(tmp_path):
@@ -279,7 +331,9 @@ def test_train_whole_body_curriculum_option(tmp_path, monkeypatch, args, want):
     run = ["train", "--whole-body", "--run-dir", str(tmp_path / "run"), *args]
     result = CliRunner().invoke(app, run)
     assert result.exit_code == 0, result.output
-    assert seen["cfg"].curriculum_env_steps == want
+    assert seen["cfg"].task.curriculum_env_steps == want
+    # The CLI's whole-body task is the variant's, whatever the curriculum.
+    assert seen["cfg"].task == tasks.whole_body(num_envs=256, curriculum_env_steps=want)
 
 
 def test_train_curriculum_rejects_an_end_before_its_start(tmp_path):

@@ -26,8 +26,9 @@ import torch
 from quaddance import __version__
 from quaddance.errors import InputFileError, QuaddanceError
 from quaddance.fileio import atomic_path
-from quaddance.play.policy_spec import task_dict
-from quaddance.sim.config import DanceTaskCfg, RewardCfg
+from quaddance.play.policy_spec import FORMAT
+from quaddance.sim import tasks
+from quaddance.sim.config import DanceTaskCfg, task_record
 
 
 @dataclass(frozen=True)
@@ -36,7 +37,7 @@ class Preset:
 
     actor_hidden: tuple[int, ...]
     critic_hidden: tuple[int, ...]
-    num_envs: int
+    num_envs: int  # the envs it is sized for: the CLI's default `DanceTaskCfg.num_envs`
     num_steps_per_env: int
     num_learning_epochs: int
     num_mini_batches: int
@@ -51,19 +52,15 @@ PRESETS: dict[str, Preset] = {
 }
 
 
-# `train --whole-body` from scratch: the paws-only task for 3 M env steps (the policy learns
-# to stand and tap first), then the whole-body task grows in until 13 M.
-DEFAULT_CURRICULUM_M_STEPS = (3.0, 13.0)
-
-
 @dataclass
 class TrainCfg:
+    """A training run: its directory, PPO settings and target bank; the task (`task`, one of
+    `quaddance.sim.tasks`'s variants) is trained as it is, envs and curriculum included."""
+
     run_dir: Path = Path("runs/dance")
     engine: str = "cpu"
     preset: str = "cpu"
-    num_envs: int | None = None  # None: the preset's
     iterations: int = 1000
-    reward: str = "paper"
     seed: int = 1
     resume: bool = False
     bank_size: int = 256
@@ -75,17 +72,10 @@ class TrainCfg:
     learning_rate: float = 1e-3  # FACTS.md section 1
     entropy_coef: float = 0.01
     # Start from another run's networks (its checkpoint.pt): inputs both tasks have keep
-    # their weights, new ones (say the body targets of --whole-body) start at zero weight,
-    # so the new policy begins as the old one and PPO learns what the new inputs add.
+    # their weights, new ones (say the body targets of the whole-body task) start at zero
+    # weight, so the new policy begins as the old one and PPO learns what the new inputs add.
     init_from: Path | None = None
-    # Whole-body curriculum, in env steps of this run: `DanceEnv.curriculum_scale` is 0 (the
-    # paws-only task: no trunk motion, no trunk-tracking or foot-slide reward) until the
-    # first number and grows linearly to 1 (the whole-body task) at the second. A run that
-    # ramped only the trunk targets, with those rewards at full weight from the start, never
-    # learnt to lift the paws (3.5 cm front error after 7 M steps; with them ramped too,
-    # 1.0 cm). None: the full task throughout.
-    curriculum_env_steps: tuple[int, int] | None = None
-    task: DanceTaskCfg = field(default_factory=DanceTaskCfg)
+    task: DanceTaskCfg = field(default_factory=tasks.paws_only)
 
 
 def rsl_rl_cfg(preset: Preset, cfg: TrainCfg) -> dict:
@@ -154,21 +144,6 @@ def build_bank(cfg: TrainCfg, progress=None) -> np.ndarray:
     return bank
 
 
-def _column_names(
-    history_len: int, n_preview: int, whole_body: bool, heading: bool
-) -> dict[str, list[str]]:
-    """One name per observation column, actor and critic (`sim.observations` layouts)."""
-    from quaddance.sim.observations import PRIVILEGED_TERMS, actor_terms
-
-    actor = [
-        f"{t['name']}[{i}]"
-        for t in actor_terms(history_len, n_preview, whole_body, heading)
-        for i in range(t["size"])
-    ]
-    critic = actor + [f"{name}[{i}]" for name, size, _ in PRIVILEGED_TERMS for i in range(size)]
-    return {"actor": actor, "critic": critic}
-
-
 def _transplant(old: dict, new: dict, old_cols: list[str], new_cols: list[str]) -> dict:
     """``new`` with ``old``'s weights: the first layer and the input normalizer column by
     column where the names match (new columns: zero weight, mean 0, variance 1); the other
@@ -220,8 +195,9 @@ def _target_cfg(cfg: TrainCfg):
 
 
 def _config_dict(cfg: TrainCfg) -> dict:
-    d = dataclasses.asdict(cfg)
+    d = {f.name: getattr(cfg, f.name) for f in dataclasses.fields(cfg)}
     d["run_dir"] = str(cfg.run_dir)
+    d["task"] = task_record(cfg.task)
     return d
 
 
@@ -236,16 +212,17 @@ class Trainer:
         if cfg.preset not in PRESETS:
             raise QuaddanceError(f"unknown preset {cfg.preset!r}: use {sorted(PRESETS)}")
         self.preset = PRESETS[cfg.preset]
+        if not cfg.task.rewards:
+            raise QuaddanceError(
+                "the task has no reward terms: build it with quaddance.sim.tasks "
+                f"({', '.join(tasks.TASKS)})"
+            )
         if cfg.torch_threads:
             torch.set_num_threads(cfg.torch_threads)
         torch.manual_seed(cfg.seed)
-        task = copy.deepcopy(cfg.task)
-        task.num_envs = cfg.num_envs or self.preset.num_envs
-        task = dataclasses.replace(task, rewards=RewardCfg.named(cfg.reward))
-        self.task_cfg = task
         cfg.run_dir.mkdir(parents=True, exist_ok=True)
         self.bank = build_bank(cfg) if bank is None else bank
-        self.env = DanceEnv(task, self.bank, engine=cfg.engine, seed=cfg.seed)
+        self.env = DanceEnv(copy.deepcopy(cfg.task), self.bank, engine=cfg.engine, seed=cfg.seed)
         self.device = str(self.env.device)
 
         from rsl_rl.algorithms import PPO
@@ -310,31 +287,27 @@ class Trainer:
 
     def _init_from(self, path: Path) -> None:
         """Copy another run's actor and critic, input column by input column (by name)."""
+        from quaddance.sim.config import task_from_record
+        from quaddance.sim.observations import ActorObservation, ObsLayout
+
         if not path.is_file():
             raise InputFileError(path, "no such checkpoint (--init-from)")
         try:
             state = torch.load(path, map_location=self.device, weights_only=True)
-            old = json.loads(state["config_json"])
-            old_task = old["task"]
-            old_names = _column_names(
-                old_task["obs"]["history_len"],
-                len(old_task["obs"]["preview_s"]),
-                bool(old_task.get("whole_body", False)),
-                bool(old_task["obs"].get("heading", False)),
-            )
-            ours = _column_names(
-                self.task_cfg.obs.history_len,
-                len(self.task_cfg.obs.preview_s),
-                self.task_cfg.whole_body,
-                self.task_cfg.obs.heading,
-            )
+            old_task = task_from_record(json.loads(state["config_json"])["task"])
+            old_names = ObsLayout.of(
+                ActorObservation(old_task, 1).layout,
+                self.env.privileged_slices,
+                old_task.obs.privileged_critic,
+            ).column_names()
+            ours = self.env.obs_layout.column_names()
             new_state = self.alg.save()
             for key, group in (("actor_state_dict", "actor"), ("critic_state_dict", "critic")):
                 new_state[key] = _transplant(
                     state[key], new_state[key], old_names[group], ours[group]
                 )
             self.alg.load(new_state, {"actor": True, "critic": True}, strict=True)
-        except (KeyError, ValueError, RuntimeError, json.JSONDecodeError) as err:
+        except (KeyError, TypeError, ValueError, RuntimeError, json.JSONDecodeError) as err:
             raise InputFileError(
                 path, f"cannot start from this checkpoint ({type(err).__name__}: {err})"
             ) from err
@@ -344,7 +317,7 @@ class Trainer:
     # --- learning ------------------------------------------------------------------------------
     def curriculum_now(self) -> float:
         """The curriculum's scale at this run's env-step count."""
-        return curriculum_scale_at(self.cfg.curriculum_env_steps, self.env_steps)
+        return curriculum_scale_at(self.cfg.task.curriculum_env_steps, self.env_steps)
 
     def learn(self, iterations: int, progress: bool = True) -> list[dict]:
         """Run `iterations` more PPO iterations; returns the learning-curve rows."""
@@ -435,7 +408,7 @@ class Trainer:
             "rear_lift_m": sums.get("/metrics/rear_lift_m", 0.0) / steps,
             # falls per ended episode; also per env-minute, which stays defined when none end
             "fall_rate": falls / ended if ended else 0.0,
-            "falls_per_env_min": falls / (n * steps * self.task_cfg.step_dt_s / 60.0),
+            "falls_per_env_min": falls / (n * steps * self.cfg.task.step_dt_s / 60.0),
             "env_steps_per_s": steps * n / max(collect_s + learn_s, 1e-9),
             "collect_s": collect_s,
             "learn_s": learn_s,
@@ -483,9 +456,8 @@ def policy_metadata(env, cfg: TrainCfg, trainer: Trainer | None = None) -> dict:
     """The policy's contract with playback and a real robot."""
     task = env.cfg
     robot = task.scene.robot
-    ramp = cfg.curriculum_env_steps
     return {
-        "format": "quaddance-policy/1",
+        "format": FORMAT,
         "version": __version__,
         "robot": robot.name,
         "joint_names": list(robot.joint_names),
@@ -511,27 +483,24 @@ def policy_metadata(env, cfg: TrainCfg, trainer: Trainer | None = None) -> dict:
         "sim_dt_s": task.scene.timestep_s,
         "decimation": task.decimation,
         "obs": {
-            "terms": env.obs_layout["actor"],
-            "dim": env.obs_layout["actor_dim"],
+            "terms": [dataclasses.asdict(s) for s in env.obs_layout.actor],
+            "dim": env.obs_layout.actor_dim,
             "preview_s": list(task.obs.preview_s),
             "history_len": task.obs.history_len,
             "normalization": "inside the ONNX model (running mean/std)",
         },
-        "task": task_dict(task),  # the task as trained (reward set, envs, ...)
+        "task": task_record(task),  # the task as trained (reward terms, envs, ...)
         # The range of front targets the policy trained on (read off its bank): playback
         # makes targets in the same range.
         "targets": {"max_height_m": round(float(env.bank[..., :2].max()), 4)},
         "training": {
             "engine": cfg.engine,
             "preset": cfg.preset,
-            "reward": cfg.reward,
             "iterations": trainer.iteration if trainer else None,
             "env_steps": trainer.env_steps if trainer else None,
             "wall_s": round(trainer.wall_s, 1) if trainer else None,
             "num_envs": env.num_envs,
             "seed": cfg.seed,
-            "curriculum_start_env_steps": ramp[0] if ramp else None,
-            "curriculum_end_env_steps": ramp[1] if ramp else None,
             # below 1: exported mid-curriculum, trained on smaller trunk motion than the dance's
             "curriculum_scale": env.curriculum_scale,
         },

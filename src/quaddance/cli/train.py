@@ -94,33 +94,35 @@ def train_cmd(
     """Train the dance policy with PPO; exports RUN_DIR/policy.onnx and policy.json."""
     from rich.console import Console
 
-    from quaddance.sim.config import DanceTaskCfg, ObsCfg, RewardCfg
-    from quaddance.train import DEFAULT_CURRICULUM_M_STEPS, PRESETS, TrainCfg, train
+    from quaddance.sim import tasks
+    from quaddance.train import PRESETS, TrainCfg, train
 
     if engine not in ("cpu", "gpu"):
         raise typer.BadParameter(f"--engine must be cpu or gpu, got {engine!r}")
     if preset not in PRESETS:
         raise typer.BadParameter(f"--preset must be one of {', '.join(PRESETS)}, got {preset!r}")
-    try:
-        RewardCfg.named(reward)
-    except ValueError as err:
-        raise typer.BadParameter(str(err)) from err
-    if curriculum is None and whole_body and init_from is None:
-        curriculum = DEFAULT_CURRICULUM_M_STEPS
-    ramp_steps = None
-    if curriculum is not None and whole_body:
+    if reward not in tasks.REWARD_SETS:
+        sets = ", ".join(tasks.REWARD_SETS)
+        raise typer.BadParameter(f"--reward must be one of {sets}, got {reward!r}")
+    options: dict = {
+        "reward_set": reward,
+        "num_envs": num_envs or PRESETS[preset].num_envs,
+        "front_feedforward": feedforward,
+    }
+    if whole_body and curriculum is not None:
         start, end = curriculum
         if not (0 <= start <= end < 1e6) or not all(math.isfinite(x) for x in curriculum):
             raise typer.BadParameter(f"--curriculum needs 0 <= START <= END, got {start} {end}")
-        ramp_steps = (round(start * 1e6), round(end * 1e6)) if end > 0 else None
+        options["curriculum_env_steps"] = (round(start * 1e6), round(end * 1e6)) if end else None
+    elif whole_body and init_from is not None:
+        options["curriculum_env_steps"] = None  # a trained policy takes the full task at once
+    variant = tasks.TASKS["whole-body" if whole_body else "paws-only"]
     console = Console(stderr=True)
     cfg = TrainCfg(
         run_dir=run_dir,
         engine=engine,
         preset=preset,
-        num_envs=num_envs,
         iterations=iterations,
-        reward=reward,
         seed=seed,
         resume=resume,
         bank_size=bank_size,
@@ -128,10 +130,7 @@ def train_cmd(
         checkpoint_every_s=checkpoint_every,
         max_minutes=minutes,
         init_from=init_from,
-        curriculum_env_steps=ramp_steps,
-        task=DanceTaskCfg(
-            front_feedforward=feedforward, whole_body=whole_body, obs=ObsCfg(heading=whole_body)
-        ),
+        task=variant(**options),
     )
     with console.status("Building the target bank (first run only) and the envs..."):
         from quaddance.fileio import ensure_dir

@@ -280,7 +280,7 @@ def write_outputs(
         if rollout.time_s.size >= 2:
             paths["rollout"] = out / "rollout.npz"
             save_rollout(paths["rollout"], rollout, beats)
-            standing_m = policy.task.rewards.base_height_target_m
+            standing_m = policy.task.base_height_target_m
             result.summary.update(whole_body_metrics(rollout, beats, standing_m))
     write_json(paths["summary"], result.summary)
     return paths

@@ -328,7 +328,7 @@ def run_live(job: LiveJob, status=lambda msg: None) -> tuple[dict, dict[str, Pat
     if rollout.time_s.size >= 2:
         paths["rollout"] = out / "rollout.npz"
         save_rollout(paths["rollout"], rollout, beats)
-        standing_m = policy.task.rewards.base_height_target_m
+        standing_m = policy.task.base_height_target_m
         summary.update(whole_body_metrics(rollout, beats, standing_m))
         if job.video:
             paths["video"] = _video(

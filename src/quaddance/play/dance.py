@@ -262,7 +262,7 @@ def _run_dance(
 
     t0 = time.perf_counter()
     title = f"{Path(dance.source).name} - {policy_path.name}"
-    measured = result.body_measured(policy.task.rewards.base_height_target_m)
+    measured = result.body_measured(policy.task.base_height_target_m)
     paths["plot"] = plot_feet(
         out / "feet.png",
         result.time_s,

@@ -7,17 +7,18 @@ allocate without bound), that lists have the right length, that strings are shor
 the numbers written twice (top level and ``task``) agree. Any problem is one
 `InputFileError` naming the file and the field, e.g. ``policy.json: obs.history_len: ...``.
 
-Schema version: ``format`` = `FORMAT`. A file with another ``format`` is refused; a field that
-this version does not know is refused (a typo would otherwise be ignored silently). Fields of
-``task`` that a file lacks take the defaults of `quaddance.sim.config.DanceTaskCfg` (older
-files predate them); the file is written back as it was read.
+Schema version: ``format`` = `FORMAT`; files of format 1 (whose ``task.rewards`` holds flat
+weights, `quaddance.sim.tasks.FLAT_REWARDS`, instead of reward terms) are read too. A file with
+another ``format`` is refused; a field that this version does not know is refused (a typo would
+otherwise be ignored silently). Fields of ``task`` that a file lacks take the defaults of
+`quaddance.sim.config.DanceTaskCfg` (older files predate them); the file is written back as it
+was read.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import difflib
-import functools
 import json
 import math
 from dataclasses import dataclass, field
@@ -28,11 +29,13 @@ import numpy as np
 
 from quaddance.errors import InputFileError
 from quaddance.robots import GO1, ROBOTS, RobotCfg, get_robot
-from quaddance.sim.config import DanceTaskCfg, DomainRandCfg, ObsCfg, RewardCfg
-from quaddance.sim.scene import SceneCfg
+from quaddance.sim.config import SOURCES, DanceTaskCfg, ObsSlice, reward_term, task_from_record
 
-FORMAT = "quaddance-policy/1"
+FORMAT = "quaddance-policy/2"
 """Schema version written in ``format``."""
+
+FLAT_REWARDS_FORMAT = "quaddance-policy/1"
+"""The schema before reward terms were entries: read, never written."""
 
 MAX_JSON_BYTES = 1 << 20
 """Largest policy JSON read, bytes (the shipped one is 15 kB)."""
@@ -55,6 +58,8 @@ _TASK_BOUNDS: dict[str, tuple[float, float]] = {
     "hip_scale_factor": (0.0, 10.0),
     "max_tilt_rad": (0.0, math.pi),
     "min_base_height_m": (0.0, 1.0),
+    "base_height_target_m": (0.0, 1.0),
+    "curriculum_env_steps": (0, 1e15),
     "scene.timestep_s": (1e-4, 0.05),
     "scene.kp": (1e-6, 1000.0),
     "scene.kd": (0.0, 100.0),
@@ -79,15 +84,6 @@ _TASK_BOUNDS: dict[str, tuple[float, float]] = {
 }
 _MAX_TUPLE = 16  # longest variable-length tuple in task (preview_s)
 _REWARD_FORMS = ("paper", "l2")
-
-
-@dataclass(frozen=True)
-class ObsTerm:
-    """One entry of the actor's observation layout."""
-
-    name: str
-    size: int
-    source: str | None = None  # where the numbers come from (absent in older files)
 
 
 @dataclass(frozen=True)
@@ -118,7 +114,7 @@ class PolicySpec:
     policy_hz: float
     sim_dt_s: float
     decimation: int
-    obs_layout: tuple[ObsTerm, ...]
+    obs_layout: tuple[ObsSlice, ...]
     obs_dim: int
     obs_preview_s: tuple[float, ...]
     obs_history_len: int
@@ -132,22 +128,7 @@ class PolicySpec:
     @property
     def task_cfg(self) -> DanceTaskCfg:
         """The task settings the policy was trained with."""
-        task = dict(self.task)
-        task.setdefault("scene", {})  # the robot is the file's top-level `robot`
-        parts = {
-            "scene": functools.partial(SceneCfg, robot=get_robot(self.robot)),
-            "rewards": RewardCfg,
-            "domain_rand": DomainRandCfg,
-            "obs": ObsCfg,
-        }
-        built = {
-            key: cls(
-                **{k: tuple(v) if isinstance(v, list) else v for k, v in task.pop(key).items()}
-            )
-            for key, cls in parts.items()
-            if key in task
-        }
-        return DanceTaskCfg(**task, **built)
+        return task_from_record(self.task, get_robot(self.robot))
 
     # --- writing -----------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
@@ -238,7 +219,7 @@ class PolicySpec:
         r = _Reader(Path(path))
         obj = r.obj(obj, "", required=_TOP_KEYS)
         fmt = r.text(obj, "format")
-        if fmt != FORMAT:
+        if fmt not in (FORMAT, FLAT_REWARDS_FORMAT):
             r.fail("format", f"{fmt!r} is not a policy format this quaddance reads ({FORMAT})")
         robot = r.text(obj, "robot")
         if robot not in ROBOTS:
@@ -250,7 +231,7 @@ class PolicySpec:
         feet = r.texts(obj, "feet", len(cfg.feet))
         if feet != cfg.feet:
             r.fail("feet", f"must be {', '.join(cfg.feet)}")
-        task = _read_task(r, obj)
+        task = _read_task(r, obj, flat_rewards=fmt == FLAT_REWARDS_FORMAT)
         has_ff = task.get("front_feedforward", DanceTaskCfg.front_feedforward)
         ff = _read_feedforward(r, obj["front_feedforward"], has_ff, cfg)
         spec = cls(
@@ -291,14 +272,6 @@ _TOP_KEYS = (
     "action_scale", "joint_target", "front_feedforward", "kp", "kd", "policy_hz", "sim_dt_s",
     "decimation", "obs", "task", "targets", "training",
 )  # fmt: skip
-
-
-def task_dict(task: DanceTaskCfg) -> dict[str, Any]:
-    """``task`` as the policy JSON's ``task`` holds it: without the robot, which the file's
-    top-level ``robot`` names."""
-    out = dataclasses.asdict(task)
-    del out["scene"]["robot"]
-    return out
 
 
 def _plain(value: Any) -> Any:
@@ -364,6 +337,12 @@ class _Reader:
         if not (math.isfinite(number) and lo <= number <= hi):
             self.fail(prefix + key, f"{_short(value)} is not a finite number in [{lo:g}, {hi:g}]")
         return value  # as written (20 stays 20, 20.0 stays 20.0): the file round-trips
+
+    def flag(self, obj: dict, key: str, prefix: str = "") -> bool:
+        value = obj[key]
+        if not isinstance(value, bool):
+            self.fail(prefix + key, f"must be true or false, got {_json_type(value)}")
+        return value
 
     def integer(self, obj: dict, key: str, lo: int, hi: int, prefix: str = "") -> int:
         value = obj[key]
@@ -438,21 +417,6 @@ def _read_feedforward(
     return FeedForwardSpec(heights, table, tuple(applies), r.text(obj, "interpolation", prefix=p))
 
 
-def _sources() -> tuple[str, ...]:
-    # Imported here: sim.observations imports torch, which `dance` loads only after it has
-    # started its render workers.
-    from quaddance.sim.observations import SOURCES
-
-    return SOURCES
-
-
-def _reward_terms() -> tuple[str, ...]:
-    # Imported here for the same reason as `_sources`.
-    from quaddance.sim.rewards import TERM_NAMES
-
-    return TERM_NAMES
-
-
 def _read_obs(r: _Reader, obj: dict) -> dict[str, Any]:
     keys = ("dim", "preview_s", "history_len", "normalization")
     # `terms` (with sources) since the robot-measurable contract; `layout` in older files.
@@ -469,10 +433,10 @@ def _read_obs(r: _Reader, obj: dict) -> dict[str, Any]:
         required = ("name", "size", "source") if key == "terms" else ("name", "size")
         term = r.obj(entry, name, required=required, optional=("source",))
         source = None if "source" not in term else r.text(term, "source", 200, name + ".")
-        if source is not None and not set(source.split("+")) <= set(_sources()):
-            r.fail(name + ".source", f"{_short(source)} is not one of {', '.join(_sources())}")
+        if source is not None and not set(source.split("+")) <= set(SOURCES):
+            r.fail(name + ".source", f"{_short(source)} is not one of {', '.join(SOURCES)}")
         terms.append(
-            ObsTerm(
+            ObsSlice(
                 r.text(term, "name", 100, name + "."),
                 r.integer(term, "size", 1, 10_000, name + "."),
                 source,
@@ -487,27 +451,39 @@ def _read_obs(r: _Reader, obj: dict) -> dict[str, Any]:
     }
 
 
-def _read_task(r: _Reader, obj: dict) -> dict[str, Any]:
+def _read_task(r: _Reader, obj: dict, flat_rewards: bool) -> dict[str, Any]:
     """Check ``task`` against `DanceTaskCfg`'s fields (their types from the defaults)."""
-    return _read_dataclass(r, obj["task"], DanceTaskCfg(), "task")
+    return _read_fields(r, obj["task"], _fields(DanceTaskCfg()), "task", flat_rewards)
 
 
-def _read_dataclass(r: _Reader, value: Any, default: Any, name: str) -> dict[str, Any]:
+def _fields(default: Any) -> dict[str, Any]:
     fields = {f.name: getattr(default, f.name) for f in dataclasses.fields(default)}
-    # The robot is the file's top-level ``robot`` (`task_dict`), not a field of ``task``.
-    fields = {k: v for k, v in fields.items() if not isinstance(v, RobotCfg)}
+    # The robot is the file's top-level ``robot`` (`task_record`), not a field of ``task``.
+    return {k: v for k, v in fields.items() if not isinstance(v, RobotCfg)}
+
+
+def _read_fields(
+    r: _Reader, value: Any, fields: dict[str, Any], name: str, flat_rewards: bool = False
+) -> dict[str, Any]:
+    """An object whose keys are some of ``fields``, each value of its default's type."""
     obj = r.obj(value, name, optional=tuple(fields))
     out: dict[str, Any] = {}
     for key, value in obj.items():
         like = fields[key]
         dotted = f"{name}.{key}"
         bound = dotted.removeprefix("task.")
-        if dataclasses.is_dataclass(like):
-            out[key] = _read_dataclass(r, value, like, dotted)
+        if dotted == "task.rewards":
+            out[key] = _read_flat_rewards(r, value) if flat_rewards else _read_rewards(r, value)
+        elif dotted == "task.curriculum_env_steps":
+            lo, hi = _TASK_BOUNDS[bound]
+            steps = None if value is None else r.numbers(obj, key, 2, lo, hi, name + ".")
+            if steps is not None and steps[0] > steps[1]:
+                r.fail(dotted, "the range's low end is above its high end")
+            out[key] = None if steps is None else list(steps)
+        elif dataclasses.is_dataclass(like):
+            out[key] = _read_fields(r, value, _fields(like), dotted)
         elif isinstance(like, bool):
-            if not isinstance(value, bool):
-                r.fail(dotted, f"must be true or false, got {_json_type(value)}")
-            out[key] = value
+            out[key] = r.flag(obj, key, name + ".")
         elif isinstance(like, str):
             text = r.text(obj, key, 100, name + ".")
             if key == "form" and text not in _REWARD_FORMS:
@@ -524,9 +500,10 @@ def _read_dataclass(r: _Reader, value: Any, default: Any, name: str) -> dict[str
                 r.fail(dotted, "must be a list of at most 32 names")
             out[key] = [r.text({key: v}, key, 100, name + ".") for v in value]
             if key == "curriculum_terms":
-                unknown = [v for v in out[key] if v not in _reward_terms()]
+                names = _reward_names()
+                unknown = [v for v in out[key] if v not in names]
                 if unknown:
-                    near = difflib.get_close_matches(unknown[0], _reward_terms(), n=1)
+                    near = difflib.get_close_matches(unknown[0], names, n=1)
                     hint = f"; did you mean {near[0]!r}?" if near else ""
                     r.fail(dotted, f"{unknown[0]!r} is no reward term{hint}")
         elif isinstance(like, tuple):
@@ -538,6 +515,54 @@ def _read_dataclass(r: _Reader, value: Any, default: Any, name: str) -> dict[str
             out[key] = list(numbers)
         else:  # a field type this reader does not know: a bug in this file, not the input
             raise TypeError(f"no check for {dotted} ({type(like).__name__})")
+    return out
+
+
+def _reward_names() -> tuple[str, ...]:
+    from quaddance.sim.tasks import dance_rewards  # torch: only once a file is checked
+
+    return tuple(dance_rewards(whole_body=True))
+
+
+def _read_flat_rewards(r: _Reader, value: Any) -> dict[str, Any]:
+    """A format-1 file's flat ``task.rewards``."""
+    from quaddance.sim.tasks import FLAT_REWARDS
+
+    return _read_fields(r, value, FLAT_REWARDS, "task.rewards")
+
+
+def _read_rewards(r: _Reader, value: Any) -> dict[str, Any]:
+    """``task.rewards``: term name -> {fn, weight, params, curriculum, per_step}."""
+    if not isinstance(value, dict) or len(value) > 64:
+        r.fail("task.rewards", "must be a JSON object of at most 64 reward terms")
+    out: dict[str, Any] = {}
+    for term_name, entry in value.items():
+        if len(term_name) > 100:
+            r.fail("task.rewards", f"term name of {len(term_name)} characters")
+        name = f"task.rewards.{term_name}"
+        keys = ("fn", "weight", "params", "curriculum", "per_step")
+        entry = r.obj(entry, name, required=keys)
+        p = name + "."
+        params = entry["params"]
+        if not isinstance(params, dict) or len(params) > 16:
+            r.fail(p + "params", "must be a JSON object of at most 16 parameters")
+        for key, param in params.items():
+            if isinstance(param, str):
+                r.text(params, key, 100, p + "params.")
+            else:
+                r.number(params, key, -_BIG, _BIG, p + "params.")
+        term = {
+            "fn": r.text(entry, "fn", 100, p),
+            "weight": r.number(entry, "weight", -_BIG, _BIG, p),
+            "params": dict(params),
+            "curriculum": r.flag(entry, "curriculum", p),
+            "per_step": r.flag(entry, "per_step", p),
+        }
+        try:
+            reward_term(term)
+        except ValueError as err:
+            r.fail(p + "fn", str(err))
+        out[term_name] = term
     return out
 
 
@@ -584,14 +609,9 @@ def _check_agreement(r: _Reader, spec: PolicySpec) -> None:
         if value != other_value:
             r.fail(name, f"disagrees with {other}: the policy was trained with other observations")
     # The terms must be the ones this code builds (sim/observations.py), in the same order.
-    from quaddance.sim.observations import actor_terms  # torch: only once a file is checked
+    from quaddance.sim.observations import ActorObservation  # torch: once a file is checked
 
-    ours = [
-        (t["name"], t["size"])
-        for t in actor_terms(
-            cfg.obs.history_len, len(cfg.obs.preview_s), cfg.whole_body, cfg.obs.heading
-        )
-    ]
+    ours = [(t.name, t.size) for t in ActorObservation(cfg, 1).layout]
     theirs = [(t.name, t.size) for t in spec.obs_layout]
     if theirs != ours:
         first = next(

@@ -8,7 +8,6 @@ feed-forward alone (``policy_output="zero"``) to show what the policy adds.
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import time
 from collections.abc import Callable
@@ -153,9 +152,10 @@ def playback_env(
     pinned: PinnedDynamics | None = None,
 ):
     """The one-env task that plays ``dance`` for ``policy`` (see `rollout` for the args)."""
+    from quaddance.sim import tasks
     from quaddance.sim.task import DanceEnv
 
-    cfg = copy.deepcopy(policy.task)
+    cfg = tasks.playback(policy.task, dance.targets_m.shape[0], randomize)
     if abs(dance.fps - cfg.policy_hz) > 1e-6:
         raise QuaddanceError(
             f"dance is at {dance.fps} Hz but the policy runs at {cfg.policy_hz} Hz"
@@ -171,10 +171,6 @@ def playback_env(
                 f"action lag must be 0-{2 * cfg.decimation * cfg.scene.timestep_s * 1e3:.0f} ms, "
                 f"got {pinned.action_lag_s * 1e3:.0f} ms"
             )
-    cfg.num_envs = 1
-    cfg.domain_rand.enabled = randomize
-    n_steps = dance.targets_m.shape[0]
-    cfg.episode_length_s = (n_steps + 1) / cfg.policy_hz  # no time-out inside the song
     ff = policy.meta.get("front_feedforward") or {}
     env = DanceEnv(
         cfg,
@@ -189,10 +185,10 @@ def playback_env(
     if pinned is not None:
         # Without randomisation the task never redraws the lag, so it stays as set here.
         env.action_lag[:] = lag_substeps
-    if env.obs_layout["actor_dim"] != policy.obs_dim:
+    if env.obs_layout.actor_dim != policy.obs_dim:
         raise QuaddanceError(
             f"policy {policy.onnx_path} expects {policy.obs_dim} observations, the task makes "
-            f"{env.obs_layout['actor_dim']}"
+            f"{env.obs_layout.actor_dim}"
         )
     return env
 

@@ -3,77 +3,50 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
+import inspect
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
+from quaddance.robots import GO1, RobotCfg
 from quaddance.sim.scene import SceneCfg
 
-# Table 1 of the paper: (c_f, lambda_f) pairs tried for eq. 2; "table1-5" is the chosen one.
-TABLE1: dict[str, tuple[float, float]] = {
-    "table1-1": (100.0, 100.0),
-    "table1-2": (100.0, 10.0),
-    "table1-3": (60.0, 100.0),
-    "table1-4": (30.0, 100.0),
-    "table1-5": (30.0, 10.0),
-}
+#: Where an actor observation term comes from on a real Go1 (the policy JSON's
+#: `obs.terms[].source`); the critic's simulator-only terms say "privileged".
+SOURCES: tuple[str, ...] = (
+    "imu",
+    "joint_encoders",
+    "foot_contact",
+    "kinematics",
+    "dance",
+    "previous_action",
+)
+
+
+@dataclass(frozen=True)
+class ObsSlice:
+    """One entry of an observation layout: a term's name, its number of columns and its
+    sensor source (None in policy files that predate sources). The layouts are derived from
+    the term tables of `quaddance.sim.observations`; the policy JSON's `obs.terms` holds them."""
+
+    name: str
+    size: int
+    source: str | None = None
 
 
 @dataclass
-class RewardCfg:
-    """Reward weights. Every term is multiplied by the policy step (dt) as in legged_gym,
-    except `termination`, which is paid once."""
+class RewardTerm:
+    """One reward term: ``weight * fn(env, **params)``, times the policy step (a rate, as in
+    legged_gym) or, with ``per_step`` false, paid once (an event such as a fall). ``fn`` is a
+    function of `quaddance.sim.rewards`; ``curriculum``: its weight grows in with training's
+    curriculum (`DanceEnv.curriculum_scale`)."""
 
-    form: str = "paper"  # "paper" = eq. 2 (exp form), "l2" = released code's -c (h - h*)^2
-    c_f: float = 30.0  # eq. 2
-    lambda_f: float = 10.0  # eq. 2
-    c_l2: float = 30.0  # released code's L2 form
-    c_r: float = -30.0  # eq. 3, rear feet (h_rl^2 + h_rr^2)
-    # Ours: eq. 3 is tiny for cm-scale lifts (2 cm -> 0.012), so a linear term keeps the
-    # rear feet down.
-    rear_lift_l1: float = -50.0
-    # Walk These Ways auxiliaries (weights from WTW's Go1 config, scaled for this task).
-    torques: float = -1e-4
-    joint_vel: float = -1e-4
-    joint_acc: float = -2.5e-7
-    action_rate: float = -0.01
-    action_smoothness: float = -0.01
-    collision: float = -5.0
-    base_orientation: float = -1.0
-    base_height: float = -10.0
-    base_height_target_m: float | None = None  # None: the robot's `standing_height_m`
-    joint_limits: float = -10.0
-    foot_slip: float = -0.04
-    # Ours: -20 per m/s slid; a foot creeping 1 cm/s costs what 0.7 mm of paw error does.
-    foot_slide: float = -20.0
-    base_drift: float = -1.0  # horizontal base velocity: dance in place
-    yaw_rate: float = -0.5
-    # Whole-body dance (DanceTaskCfg.whole_body): trunk-pose tracking in eq. 2's exp form,
-    # c_body (exp(-lambda |e|) - 1) per term. base_height, base_orientation and yaw_rate
-    # above are measured relative to the body target, so they equal the old terms at zero.
-    c_body: float = 30.0
-    lambda_body_height_per_m: float = 10.0  # 1 cm off: -2.9 / s, like a front foot 1 cm off
-    lambda_body_angle_per_rad: float = 3.0  # 3 deg off: -4.4 / s
-    termination: float = -200.0  # once per fall; outweighs the discounted penalties it escapes
-    # Terms that training's curriculum (`DanceEnv.curriculum_scale`) brings in gradually:
-    # holding the trunk to a pose and the stance feet still both make lifting a paw costly,
-    # and from scratch with them at full weight the policy learnt never to lift.
-    curriculum_terms: tuple[str, ...] = (
-        "body_height_tracking",
-        "body_tilt_tracking",
-        "body_yaw_tracking",
-        "foot_slide",
-    )
-
-    @classmethod
-    def named(cls, name: str) -> RewardCfg:
-        """`paper` (eq. 2, c_f 30, lambda_f 10), `l2`, or `table1-1` ... `table1-5`."""
-        if name == "paper":
-            return cls()
-        if name == "l2":
-            return cls(form="l2")
-        if name in TABLE1:
-            c_f, lam = TABLE1[name]
-            return cls(c_f=c_f, lambda_f=lam)
-        raise ValueError(f"unknown reward set {name!r}: use paper, l2 or one of {sorted(TABLE1)}")
+    fn: Callable[..., Any]
+    weight: float
+    params: dict[str, Any] = field(default_factory=dict)
+    curriculum: bool = False
+    per_step: bool = True
 
 
 @dataclass
@@ -135,10 +108,19 @@ class DanceTaskCfg:
     # Terminations; None: the robot's (`RobotCfg.max_tilt_rad`, `min_base_height_m`).
     max_tilt_rad: float | None = None
     min_base_height_m: float | None = None
+    # The standing trunk height the rewards and body metrics measure from; None: the
+    # robot's `standing_height_m`.
+    base_height_target_m: float | None = None
     scene: SceneCfg = field(default_factory=SceneCfg)
-    rewards: RewardCfg = field(default_factory=RewardCfg)
+    # The reward terms by name, in the order they are summed; `quaddance.sim.tasks` builds
+    # them for each task variant (a config without them computes no reward).
+    rewards: dict[str, RewardTerm] = field(default_factory=dict)
     domain_rand: DomainRandCfg = field(default_factory=DomainRandCfg)
     obs: ObsCfg = field(default_factory=ObsCfg)
+    # Training's curriculum, in env steps of the run: `DanceEnv.curriculum_scale` is 0 (the
+    # body targets and the `RewardTerm.curriculum` terms off) until the first number and grows
+    # linearly to 1 at the second. None: the full task throughout.
+    curriculum_env_steps: tuple[int, int] | None = None
 
     def __post_init__(self) -> None:
         # The robot's numbers are filled in here, so that a saved task (the policy JSON's
@@ -148,10 +130,8 @@ class DanceTaskCfg:
             self.max_tilt_rad = robot.max_tilt_rad
         if self.min_base_height_m is None:
             self.min_base_height_m = robot.min_base_height_m
-        if self.rewards.base_height_target_m is None:
-            self.rewards = dataclasses.replace(
-                self.rewards, base_height_target_m=robot.standing_height_m
-            )
+        if self.base_height_target_m is None:
+            self.base_height_target_m = robot.standing_height_m
 
     @property
     def step_dt_s(self) -> float:
@@ -160,3 +140,69 @@ class DanceTaskCfg:
     @property
     def max_episode_steps(self) -> int:
         return round(self.episode_length_s * self.policy_hz)
+
+
+def task_record(cfg: DanceTaskCfg) -> dict[str, Any]:
+    """The task as plain data (the policy JSON's ``task``, a checkpoint's config): each reward
+    term's function by its name in `quaddance.sim.rewards`; without the robot, which the
+    policy JSON's top-level ``robot`` names."""
+    record = dataclasses.asdict(dataclasses.replace(cfg, rewards={}))
+    del record["scene"]["robot"]
+    record["rewards"] = {
+        name: {
+            "fn": term.fn.__name__,
+            "weight": term.weight,
+            "params": dict(term.params),
+            "curriculum": term.curriculum,
+            "per_step": term.per_step,
+        }
+        for name, term in cfg.rewards.items()
+    }
+    return record
+
+
+def task_from_record(record: dict[str, Any], robot: RobotCfg = GO1) -> DanceTaskCfg:
+    """The task of ``robot`` in a `task_record` (or in a record written before reward terms
+    were entries, whose flat ``rewards`` `quaddance.sim.tasks.rewards_from_flat` turns into
+    terms)."""
+    task = dict(record)
+    task.setdefault("scene", {})
+    parts = {
+        "scene": functools.partial(SceneCfg, robot=robot),
+        "domain_rand": DomainRandCfg,
+        "obs": ObsCfg,
+    }
+    built: dict[str, Any] = {
+        key: cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in task.pop(key).items()})
+        for key, cls in parts.items()
+        if key in task
+    }
+    rewards = task.pop("rewards", {})
+    if any(not isinstance(v, dict) for v in rewards.values()):
+        from quaddance.sim.tasks import rewards_from_flat  # torch: only for older records
+
+        built["rewards"], task["base_height_target_m"] = rewards_from_flat(
+            rewards, task.get("whole_body", False)
+        )
+    else:
+        built["rewards"] = {name: reward_term(entry) for name, entry in rewards.items()}
+    if task.get("curriculum_env_steps") is not None:
+        task["curriculum_env_steps"] = tuple(task["curriculum_env_steps"])
+    return DanceTaskCfg(**task, **built)
+
+
+def reward_term(entry: dict[str, Any]) -> RewardTerm:
+    """A `RewardTerm` of its record; the function must be one of `quaddance.sim.rewards`."""
+    from quaddance.sim import rewards  # torch: only when a record is read
+
+    name = entry["fn"]
+    fn = None if name.startswith("_") else getattr(rewards, name, None)
+    if not inspect.isfunction(fn) or fn.__module__ != rewards.__name__:
+        raise ValueError(f"{name!r} is not a reward function of quaddance.sim.rewards")
+    try:
+        inspect.signature(fn).bind(None, **entry["params"])
+    except TypeError as err:
+        raise ValueError(f"{name}'s parameters: {err}") from None
+    return RewardTerm(
+        fn, entry["weight"], dict(entry["params"]), entry["curriculum"], entry["per_step"]
+    )

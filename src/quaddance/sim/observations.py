@@ -1,38 +1,29 @@
 """Observation terms: the actor sees only what a real Go1 measures or knows.
 
-The actor's input is built from a `Measurement` (IMU and joint encoders), the dance's targets
-and the policy's previous action, by `ActorObservation`. Training (N envs, batched) and the
-robot runner (one robot) use that same class, so the observation is defined once. Each term
-is one `ObsTerm` entry of `PROPRIO_TERMS` (name, size, sensor source, function); the layout
-written into the policy's JSON is read off the same table. The critic also sees privileged
-simulator quantities (`privileged`), which never reach the actor.
+Each term is one `ObsTerm` entry (name, function, sensor source) of a table: `PROPRIO_TERMS`
+(what the robot measures, one frame, also stacked as the history), the dance's targets
+(`dance_terms`: `PAW_TARGET_TERMS`, `BODY_TARGET_TERMS`, `HEADING_TERMS`) and
+`PRIVILEGED_TERMS` (simulator quantities, critic only). A term's size is
+found by calling it once; the actor's layout, the critic's, the policy JSON's `obs.terms` and
+the training log's column names are all read off these tables (`ObsLayout`).
+
+The actor's input is built from a `Measurement` (IMU and joint encoders, with their sensor
+noise in training), the dance's targets and the policy's previous action, by
+`ActorObservation`. Training (N envs, batched) and the robot runner (one robot) use that same
+class, so the observation is defined once.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Any
 
 import torch
 
-from quaddance.robots import GO1
-from quaddance.sim.config import DanceTaskCfg, DomainRandCfg
+from quaddance.sim.config import DanceTaskCfg, DomainRandCfg, ObsSlice
 from quaddance.sim.kinematics import estimate_foot_height_m, leg_geometry
 from quaddance.sim.state import RobotState, quat_rotate_inverse, wrap_angle_rad, yaw_from_quat
-
-if TYPE_CHECKING:
-    from quaddance.sim.task import DanceEnv
-
-#: Where an actor term comes from on a real Go1 (the policy JSON's `obs.terms[].source`).
-SOURCES: tuple[str, ...] = (
-    "imu",
-    "joint_encoders",
-    "foot_contact",
-    "kinematics",
-    "dance",
-    "previous_action",
-)
 
 
 @dataclass
@@ -97,41 +88,125 @@ class Measurement:
 
 @dataclass(frozen=True)
 class ObsTerm:
-    """One proprioceptive actor term: `fn(measurement, last_action, builder) -> (N, size)`."""
+    """One observation term: ``fn(x) -> (N, size)`` (``x``: the `ActorObservation` for actor
+    terms, the `DanceEnv` for privileged ones), measured by ``source``."""
 
     name: str
-    size: int
+    fn: Callable[[Any], torch.Tensor]
     source: str
-    fn: Callable[[Measurement, torch.Tensor, ActorObservation], torch.Tensor]
 
 
-def _foot_height(m: Measurement, last_action: torch.Tensor, ob: ActorObservation) -> torch.Tensor:
-    """Leg kinematics from the encoders, turned upright by the IMU (sim/kinematics.py)."""
-    return estimate_foot_height_m(m.joint_pos_rad, m.projected_gravity_b, ob.geom)
+def _preview(
+    at: Callable[[int], torch.Tensor], steps: list[int], cols: slice | None = None
+) -> torch.Tensor:
+    """(N, k * len(steps)): ``at(step)`` (its columns ``cols``) for each preview step."""
+    if not steps:
+        return at(0)[:, :0]
+    return torch.cat([at(k) if cols is None else at(k)[:, cols] for k in steps], dim=1)
 
 
+def _heading_error(ob: ActorObservation) -> torch.Tensor:
+    """IMU heading since the dance began minus the target yaw, wrapped to +-pi."""
+    return wrap_angle_rad(ob.meas.heading_rad - ob.body_targets_at(0)[:, 3])[:, None]
+
+
+_FRONT = slice(0, 2)  # a paw-target row's front paws
+
+#: One frame of what the robot measures, in order (the history stacks whole frames).
 PROPRIO_TERMS: tuple[ObsTerm, ...] = (
-    ObsTerm("projected_gravity", 3, "imu", lambda m, a, ob: m.projected_gravity_b),
-    ObsTerm("base_ang_vel_b", 3, "imu", lambda m, a, ob: m.gyro_rad_s),
+    ObsTerm("projected_gravity", lambda ob: ob.meas.projected_gravity_b, "imu"),
+    ObsTerm("base_ang_vel_b", lambda ob: ob.meas.gyro_rad_s, "imu"),
     ObsTerm(
-        "joint_pos_rel",
-        GO1.num_joints,
-        "joint_encoders",
-        lambda m, a, ob: m.joint_pos_rad - ob.nominal_joint_pos,
+        "joint_pos_rel", lambda ob: ob.meas.joint_pos_rad - ob.nominal_joint_pos, "joint_encoders"
     ),
-    ObsTerm("joint_vel", GO1.num_joints, "joint_encoders", lambda m, a, ob: m.joint_vel_rad_s),
-    ObsTerm("last_action", GO1.num_joints, "previous_action", lambda m, a, ob: a),
-    ObsTerm("foot_height_m", 4, "kinematics", _foot_height),
+    ObsTerm("joint_vel", lambda ob: ob.meas.joint_vel_rad_s, "joint_encoders"),
+    ObsTerm("last_action", lambda ob: ob.last_action, "previous_action"),
+    # Leg kinematics from the encoders, turned upright by the IMU (sim/kinematics.py).
+    ObsTerm(
+        "foot_height_m",
+        lambda ob: estimate_foot_height_m(
+            ob.meas.joint_pos_rad, ob.meas.projected_gravity_b, ob.geom
+        ),
+        "kinematics",
+    ),
 )
-PROPRIO_DIM = sum(t.size for t in PROPRIO_TERMS)
+
+#: The dance's targets, after the history: the front paws' targets now and ahead.
+PAW_TARGET_TERMS: tuple[ObsTerm, ...] = (
+    ObsTerm("front_targets_now_m", lambda ob: ob.targets_at(0)[:, _FRONT], "dance"),
+    ObsTerm(
+        "front_targets_preview_m",
+        lambda ob: _preview(ob.targets_at, ob.preview_steps, _FRONT),
+        "dance",
+    ),
+)
+#: Whole-body dance: then the body targets now and ahead, and with `ObsCfg.heading` the
+#: heading error (`HEADING_TERMS`).
+BODY_TARGET_TERMS: tuple[ObsTerm, ...] = (
+    ObsTerm("body_targets_now", lambda ob: ob.body_targets_at(0), "dance"),
+    ObsTerm(
+        "body_targets_preview",
+        lambda ob: _preview(ob.body_targets_at, ob.preview_steps),
+        "dance",
+    ),
+)
+HEADING_TERMS: tuple[ObsTerm, ...] = (ObsTerm("heading_error_rad", _heading_error, "dance+imu"),)
+
+
+def dance_terms(cfg: DanceTaskCfg) -> tuple[ObsTerm, ...]:
+    """The dance's terms of this task, in order (they follow the proprio history)."""
+    if not cfg.whole_body:
+        return PAW_TARGET_TERMS
+    return PAW_TARGET_TERMS + BODY_TARGET_TERMS + (HEADING_TERMS if cfg.obs.heading else ())
+
+
+#: Critic-only terms: simulator quantities no robot measures.
+PRIVILEGED_TERMS: tuple[ObsTerm, ...] = (
+    # friction, added mass, motor strength
+    ObsTerm("privileged.dynamics", lambda env: env.dynamics, "privileged"),
+    ObsTerm("privileged.base_lin_vel_b", lambda env: env.robot.base_lin_vel_b, "privileged"),
+    ObsTerm("privileged.base_height_m", lambda env: env.robot.base_pos_w[:, 2:3], "privileged"),
+)
+
+
+@dataclass(frozen=True)
+class ObsLayout:
+    """The actor's and the critic's observation, slice by slice, in order."""
+
+    actor: tuple[ObsSlice, ...]
+    critic: tuple[ObsSlice, ...]
+
+    @property
+    def actor_dim(self) -> int:
+        return sum(s.size for s in self.actor)
+
+    @property
+    def critic_dim(self) -> int:
+        return sum(s.size for s in self.critic)
+
+    @classmethod
+    def of(
+        cls, actor: tuple[ObsSlice, ...], privileged: tuple[ObsSlice, ...], privileged_critic: bool
+    ) -> ObsLayout:
+        """The actor's slices (`ActorObservation.layout`); the critic sees them and, with
+        `ObsCfg.privileged_critic`, the ``privileged`` ones (`DanceEnv.privileged_slices`)."""
+        return cls(actor, actor + (privileged if privileged_critic else ()))
+
+    def column_names(self) -> dict[str, list[str]]:
+        """One name per column, ``term[i]``, for the actor and the critic."""
+        return {
+            group: [f"{s.name}[{i}]" for s in slices for i in range(s.size)]
+            for group, slices in (("actor", self.actor), ("critic", self.critic))
+        }
 
 
 class ActorObservation:
-    """The actor's input: [proprio now, proprio history, front targets now, preview].
+    """The actor's input: [proprio now, proprio history, dance terms].
 
     One object per batch of robots (N envs in training, 1 on the robot); it keeps the
     history of past proprio frames. Per policy step: `prop = proprio(meas, last_action)`,
-    `obs = build(prop, targets_at)`, act, then `push(prop)`.
+    `obs = build(prop, targets_at)`, act, then `push(prop)`. The terms read what they need
+    off this object (`meas`, `last_action`, `targets_at`, ...).
     """
 
     def __init__(self, cfg: DanceTaskCfg, num_envs: int, device: torch.device | str = "cpu"):
@@ -139,19 +214,36 @@ class ActorObservation:
         self.history_len = cfg.obs.history_len
         self.preview_steps = [round(s * cfg.policy_hz) for s in cfg.obs.preview_s]
         self.whole_body = cfg.whole_body
-        self.heading = cfg.whole_body and cfg.obs.heading
-        self._heading_rad = torch.zeros(num_envs, device=self.device)
-        self.nominal_joint_pos = torch.tensor(
-            cfg.scene.robot.nominal_joint_pos_rad, device=self.device
+        robot = cfg.scene.robot
+        self.nominal_joint_pos = torch.tensor(robot.nominal_joint_pos_rad, device=self.device)
+        self.geom = leg_geometry(robot)
+        # Sizes: each term called once on one robot at rest (mjlab's `_prepare_terms`).
+        zeros = lambda *shape: torch.zeros(*shape, device=self.device)  # noqa: E731
+        j = robot.num_joints
+        self.meas = Measurement(zeros(1, 3), zeros(1, 3), zeros(1, j), zeros(1, j), zeros(1))
+        self.last_action = zeros(1, j)
+        self.targets_at: Callable[[int], torch.Tensor] = lambda k: zeros(1, 4)
+        self.body_targets_at: Callable[[int], torch.Tensor] = lambda k: zeros(1, 4)
+        proprio = [(t, t.fn(self).shape[1]) for t in PROPRIO_TERMS]
+        dance = [(t, t.fn(self).shape[1]) for t in dance_terms(cfg)]
+        self.dance_terms = tuple(t for t, size in dance if size)
+        self.proprio_dim = sum(size for _, size in proprio)
+        history_source = "+".join(sorted({t.source for t in PROPRIO_TERMS}))
+        self.layout: tuple[ObsSlice, ...] = (
+            *(ObsSlice(f"proprio.{t.name}", size, t.source) for t, size in proprio),
+            *(
+                ObsSlice(f"history[{h}].proprio", self.proprio_dim, history_source)
+                for h in range(1, self.history_len + 1)
+            ),
+            *(ObsSlice(t.name, size, t.source) for t, size in dance if size),
         )
-        self.geom = leg_geometry(cfg.scene.robot)
-        self.history = torch.zeros(num_envs, self.history_len, PROPRIO_DIM, device=self.device)
+        self.history = zeros(num_envs, self.history_len, self.proprio_dim)
 
     def proprio(self, meas: Measurement, last_action: torch.Tensor) -> torch.Tensor:
-        """(N, PROPRIO_DIM): the `PROPRIO_TERMS`, in order. The measurement's heading is
-        kept for the next `build` (it is not part of the history)."""
-        self._heading_rad = meas.heading_rad
-        return torch.cat([t.fn(meas, last_action, self) for t in PROPRIO_TERMS], dim=1)
+        """(N, proprio_dim): the `PROPRIO_TERMS`, in order. The measurement is kept for the
+        next `build` (its heading is not part of the history)."""
+        self.meas, self.last_action = meas, last_action
+        return torch.cat([t.fn(self) for t in PROPRIO_TERMS], dim=1)
 
     def build(
         self,
@@ -161,16 +253,12 @@ class ActorObservation:
     ) -> torch.Tensor:
         """(N, dim): ``targets_at(k)`` gives the (N, 4) paw targets k policy steps ahead, m;
         ``body_targets_at(k)`` the (N, 4) body targets (whole-body dance only)."""
-        parts = [prop, self.history.flatten(1), targets_at(0)[:, :2]]
-        parts += [targets_at(k)[:, :2] for k in self.preview_steps]
-        if self.whole_body:
-            if body_targets_at is None:
-                raise ValueError("a whole-body policy needs the dance's body targets")
-            parts.append(body_targets_at(0))
-            parts += [body_targets_at(k) for k in self.preview_steps]
-            if self.heading:
-                error = wrap_angle_rad(self._heading_rad - body_targets_at(0)[:, 3])
-                parts.append(error[:, None])
+        if self.whole_body and body_targets_at is None:
+            raise ValueError("a whole-body policy needs the dance's body targets")
+        self.targets_at = targets_at
+        if body_targets_at is not None:
+            self.body_targets_at = body_targets_at
+        parts = [prop, self.history.flatten(1), *(t.fn(self) for t in self.dance_terms)]
         return torch.cat(parts, dim=1)
 
     def push(self, prop: torch.Tensor) -> None:
@@ -182,60 +270,3 @@ class ActorObservation:
         """Fill the history of robots ``ids`` with their current frame ``prop`` (N, P)."""
         if self.history_len:
             self.history[ids] = prop[ids].unsqueeze(1)
-
-    def layout(self) -> list[dict]:
-        """Actor terms in order: name, size and sensor source (the policy JSON's `obs.terms`)."""
-        return actor_terms(self.history_len, len(self.preview_steps), self.whole_body, self.heading)
-
-
-def actor_terms(
-    history_len: int, n_preview: int, whole_body: bool = False, heading: bool = False
-) -> list[dict]:
-    """The actor's terms in order, each `{"name", "size", "source"}` (``heading``: the
-    whole-body heading error, `ObsCfg.heading`)."""
-    terms = [
-        {"name": f"proprio.{t.name}", "size": t.size, "source": t.source} for t in PROPRIO_TERMS
-    ]
-    history_source = "+".join(sorted({t.source for t in PROPRIO_TERMS}))
-    terms += [
-        {"name": f"history[{h}].proprio", "size": PROPRIO_DIM, "source": history_source}
-        for h in range(1, history_len + 1)
-    ]
-    terms.append({"name": "front_targets_now_m", "size": 2, "source": "dance"})
-    if n_preview:
-        terms.append({"name": "front_targets_preview_m", "size": 2 * n_preview, "source": "dance"})
-    if whole_body:
-        terms.append({"name": "body_targets_now", "size": 4, "source": "dance"})
-        if n_preview:
-            terms.append({"name": "body_targets_preview", "size": 4 * n_preview, "source": "dance"})
-        if heading:
-            # IMU heading since the dance began minus the target yaw, wrapped to +-pi.
-            terms.append({"name": "heading_error_rad", "size": 1, "source": "dance+imu"})
-    return terms
-
-
-#: Critic-only terms: simulator quantities no robot measures (name, size, function).
-PRIVILEGED_TERMS: tuple[tuple[str, int, Callable[[DanceEnv], torch.Tensor]], ...] = (
-    ("privileged.dynamics", 3, lambda env: env.dynamics),  # friction, added mass, strength
-    ("privileged.base_lin_vel_b", 3, lambda env: env.robot.base_lin_vel_b),
-    ("privileged.base_height_m", 1, lambda env: env.robot.base_pos_w[:, 2:3]),
-)
-
-
-def privileged(env: DanceEnv) -> torch.Tensor:
-    """(N, 7) the `PRIVILEGED_TERMS`, in order."""
-    return torch.cat([fn(env) for _, _, fn in PRIVILEGED_TERMS], dim=1)
-
-
-def observation_layout(actor: ActorObservation, privileged_critic: bool) -> dict:
-    """Names, sizes and sources of the actor's and critic's observation slices, in order."""
-    actor_terms = actor.layout()
-    critic = list(actor_terms)
-    if privileged_critic:
-        critic += [{"name": n, "size": k, "source": "privileged"} for n, k, _ in PRIVILEGED_TERMS]
-    return {
-        "actor": actor_terms,
-        "critic": critic,
-        "actor_dim": sum(t["size"] for t in actor_terms),
-        "critic_dim": sum(t["size"] for t in critic),
-    }

@@ -1,7 +1,13 @@
-"""Reward terms: one small function each, returning (N,) before the weight and dt."""
+"""Reward terms: one small function each, ``fn(env, **params) -> (N,)`` before its weight.
+
+A task's terms are `RewardTerm` entries (function, weight, parameters, curriculum) of
+`DanceTaskCfg.rewards`, built by `quaddance.sim.tasks`. The tracking errors that several terms
+and the training log read are computed once per step, by `TrackingErrors`.
+"""
 
 from __future__ import annotations
 
+import functools
 from typing import TYPE_CHECKING
 
 import torch
@@ -12,20 +18,58 @@ if TYPE_CHECKING:
     from quaddance.sim.task import DanceEnv
 
 
-def front_tracking(env: DanceEnv) -> torch.Tensor:
-    """Eq. 2: sum over FL, FR of c_f (exp(-lambda_f |h - h*|) - 1) (0 when tracked), or the
-    released code's L2 form -c (h - h*)^2 when `form == "l2"`."""
-    cfg = env.cfg.rewards
-    err = env.robot.foot_height_m[:, :2] - env.targets_at(0)[:, :2]
-    if cfg.form == "l2":
-        return -cfg.c_l2 * (err**2).sum(dim=1)
-    return (cfg.c_f * (torch.exp(-cfg.lambda_f * err.abs()) - 1.0)).sum(dim=1)
+class TrackingErrors:
+    """The dance's tracking errors at one step, each computed once when first read (the reward
+    terms and the training log share them); `DanceEnv` makes a new one after every step."""
+
+    def __init__(self, env: DanceEnv) -> None:
+        self._env = env
+
+    @functools.cached_property
+    def front_m(self) -> torch.Tensor:
+        """(N, 2) FL, FR foot height minus its target, m."""
+        return self._env.robot.foot_height_m[:, :2] - self._env.targets_at(0)[:, :2]
+
+    @functools.cached_property
+    def body_height_m(self) -> torch.Tensor:
+        """(N,) trunk height minus the standing height plus the body target's offset, m."""
+        env = self._env
+        target_m = env.cfg.base_height_target_m + env.body_targets_at(0)[:, 0]
+        return env.robot.base_pos_w[:, 2] - target_m
+
+    @functools.cached_property
+    def gravity_target_b(self) -> torch.Tensor:
+        """(N, 3) gravity direction in the trunk frame at the body target's roll and pitch."""
+        return target_gravity_b(self._env.body_targets_at(0))
+
+    @functools.cached_property
+    def body_tilt(self) -> torch.Tensor:
+        """(N,) distance of the gravity direction from the target's (about the tilt, rad)."""
+        return (self._env.robot.projected_gravity_b - self.gravity_target_b).norm(dim=1)
+
+    @functools.cached_property
+    def body_yaw_rad(self) -> torch.Tensor:
+        """(N,) heading minus the target yaw, wrapped; episodes start facing yaw 0."""
+        env = self._env
+        return wrap_angle_rad(env.robot.base_yaw_rad - env.body_targets_at(0)[:, 3])
+
+
+def front_tracking(env: DanceEnv, c_f: float, lambda_f: float) -> torch.Tensor:
+    """Eq. 2: sum over FL, FR of c_f (exp(-lambda_f |h - h*|) - 1); 0 when tracked (Table 1
+    of the paper varies c_f and lambda_f together, so they are the term's parameters)."""
+    err = env.errors.front_m
+    return (c_f * (torch.exp(-lambda_f * err.abs()) - 1.0)).sum(dim=1)
+
+
+def front_tracking_l2(env: DanceEnv) -> torch.Tensor:
+    """The released code's form of eq. 2: (h - h*)^2 summed over FL, FR."""
+    return (env.errors.front_m**2).sum(dim=1)
 
 
 def rear_lift(env: DanceEnv) -> torch.Tensor:
-    """Eq. 3: c_r (h_rl^2 + h_rr^2); the weight of this term is 1 (c_r carries the sign)."""
+    """Eq. 3: h_rl^2 + h_rr^2 (its weight is the paper's c_r)."""
     h = env.robot.foot_height_m[:, 2:].clamp(min=0.0)
-    return env.cfg.rewards.c_r * (h**2).sum(dim=1)
+    return (h**2).sum(dim=1)
 
 
 def rear_lift_l1(env: DanceEnv) -> torch.Tensor:
@@ -69,42 +113,32 @@ def target_gravity_b(body: torch.Tensor) -> torch.Tensor:
 
 def base_orientation(env: DanceEnv) -> torch.Tensor:
     """Squared tilt away from the body target's roll and pitch (level when there is none)."""
-    g_star = target_gravity_b(env.body_targets_at(0))
+    g_star = env.errors.gravity_target_b
     return ((env.robot.projected_gravity_b[:, :2] - g_star[:, :2]) ** 2).sum(dim=1)
 
 
-def _height_target_m(env: DanceEnv) -> torch.Tensor:
-    return env.cfg.rewards.base_height_target_m + env.body_targets_at(0)[:, 0]
-
-
 def base_height(env: DanceEnv) -> torch.Tensor:
-    return (env.robot.base_pos_w[:, 2] - _height_target_m(env)) ** 2
+    """Squared trunk height error (standing height plus the body target's offset)."""
+    return env.errors.body_height_m**2
 
 
 def _exp_tracking(err: torch.Tensor, lam: float, c: float) -> torch.Tensor:
     return c * (torch.exp(-lam * err.abs()) - 1.0)
 
 
-def body_height_tracking(env: DanceEnv) -> torch.Tensor:
+def body_height_tracking(env: DanceEnv, c: float, lambda_per_m: float) -> torch.Tensor:
     """Trunk height vs standing height + the target's offset, eq. 2's exp form."""
-    cfg = env.cfg.rewards
-    err = env.robot.base_pos_w[:, 2] - _height_target_m(env)
-    return _exp_tracking(err, cfg.lambda_body_height_per_m, cfg.c_body)
+    return _exp_tracking(env.errors.body_height_m, lambda_per_m, c)
 
 
-def body_tilt_tracking(env: DanceEnv) -> torch.Tensor:
+def body_tilt_tracking(env: DanceEnv, c: float, lambda_per_rad: float) -> torch.Tensor:
     """Roll and pitch vs the target's: the gravity direction's distance (about the angle)."""
-    cfg = env.cfg.rewards
-    g_star = target_gravity_b(env.body_targets_at(0))
-    err = (env.robot.projected_gravity_b - g_star).norm(dim=1)
-    return _exp_tracking(err, cfg.lambda_body_angle_per_rad, cfg.c_body)
+    return _exp_tracking(env.errors.body_tilt, lambda_per_rad, c)
 
 
-def body_yaw_tracking(env: DanceEnv) -> torch.Tensor:
+def body_yaw_tracking(env: DanceEnv, c: float, lambda_per_rad: float) -> torch.Tensor:
     """Heading vs the target yaw; episodes start facing yaw 0, so heading = twist."""
-    cfg = env.cfg.rewards
-    err = wrap_angle_rad(env.robot.base_yaw_rad - env.body_targets_at(0)[:, 3])
-    return _exp_tracking(err, cfg.lambda_body_angle_per_rad, cfg.c_body)
+    return _exp_tracking(env.errors.body_yaw_rad, lambda_per_rad, c)
 
 
 def joint_limits(env: DanceEnv) -> torch.Tensor:
@@ -142,30 +176,6 @@ def yaw_rate(env: DanceEnv) -> torch.Tensor:
     return (env.robot.base_ang_vel_b[:, 2] - want) ** 2
 
 
-# name -> (term, weight attribute of RewardCfg or None for weight 1)
-TERMS = {
-    "front_tracking": (front_tracking, None),
-    "rear_lift": (rear_lift, None),
-    "rear_lift_l1": (rear_lift_l1, "rear_lift_l1"),
-    "torques": (torques, "torques"),
-    "joint_vel": (joint_vel, "joint_vel"),
-    "joint_acc": (joint_acc, "joint_acc"),
-    "action_rate": (action_rate, "action_rate"),
-    "action_smoothness": (action_smoothness, "action_smoothness"),
-    "collision": (collision, "collision"),
-    "base_orientation": (base_orientation, "base_orientation"),
-    "base_height": (base_height, "base_height"),
-    "joint_limits": (joint_limits, "joint_limits"),
-    "foot_slip": (foot_slip, "foot_slip"),
-    "foot_slide": (foot_slide, "foot_slide"),
-    "base_drift": (base_drift, "base_drift"),
-    "yaw_rate": (yaw_rate, "yaw_rate"),
-}
-#: Terms of whole-body dance only (DanceTaskCfg.whole_body); weight 1, c_body carries it.
-BODY_TERMS = {
-    "body_height_tracking": (body_height_tracking, None),
-    "body_tilt_tracking": (body_tilt_tracking, None),
-    "body_yaw_tracking": (body_yaw_tracking, None),
-}
-#: Every reward term's name (`RewardCfg.curriculum_terms` must name some of these).
-TERM_NAMES: tuple[str, ...] = (*TERMS, *BODY_TERMS)
+def fall(env: DanceEnv) -> torch.Tensor:
+    """1 where the robot fell this step (`quaddance.sim.terminations.fell`), else 0."""
+    return env.fell.float()

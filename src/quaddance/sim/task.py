@@ -14,7 +14,7 @@ import torch
 
 from quaddance.sim import observations, rewards, terminations
 from quaddance.sim.body import BODY_DIM, BodyFeedforward
-from quaddance.sim.config import DanceTaskCfg
+from quaddance.sim.config import DanceTaskCfg, ObsSlice
 from quaddance.sim.engine import Engine, nominal_dynamics
 from quaddance.sim.engines import make_engine
 from quaddance.sim.feedforward import FrontLiftFeedforward
@@ -99,12 +99,6 @@ class DanceEnv:
         self._gen = torch.Generator().manual_seed(seed)
         if abs(cfg.scene.timestep_s * cfg.decimation - cfg.step_dt_s) > 1e-9:
             raise ValueError("scene.timestep_s * decimation must equal 1 / policy_hz")
-        unknown = set(cfg.rewards.curriculum_terms) - set(rewards.TERM_NAMES)
-        if unknown:  # a misspelt name would silently train that term at full weight
-            raise ValueError(
-                f"RewardCfg.curriculum_terms: no reward term named {', '.join(sorted(unknown))}"
-                f"; the terms are {', '.join(rewards.TERM_NAMES)}"
-            )
         variants = sample_dynamics(cfg, self._rng) if dynamics is None else np.asarray(dynamics)
         self.engine: Engine = make_engine(engine, cfg.num_envs, cfg.scene, variants)
         self.device = self.engine.device
@@ -122,7 +116,7 @@ class DanceEnv:
         self.random_start = random_start
         # Training's curriculum (0: the paws-only task, 1: the full one) scales the body
         # targets, which everything reads through `body_targets_at` (observation, rewards,
-        # feed-forward), and the reward terms of `RewardCfg.curriculum_terms`.
+        # feed-forward), and the weights of the `RewardTerm.curriculum` terms.
         self.curriculum_scale = 1.0
         # The actor's observation: the same builder as the robot runner's (deploy/).
         self.actor_obs = observations.ActorObservation(cfg, cfg.num_envs, dev)
@@ -159,6 +153,15 @@ class DanceEnv:
         self.dynamics = self._variants[torch.zeros(n, dtype=torch.long, device=dev)]
         self._last_proprio: torch.Tensor | None = None
         self.robot: RobotState = self._read_state()
+        self.errors = rewards.TrackingErrors(self)
+        self.fell = torch.zeros(n, dtype=torch.bool, device=dev)
+        #: The critic's privileged slices, each term's size found by calling it once.
+        self.privileged_slices = tuple(
+            ObsSlice(t.name, t.fn(self).shape[1], t.source) for t in observations.PRIVILEGED_TERMS
+        )
+        self.obs_layout = observations.ObsLayout.of(
+            self.actor_obs.layout, self.privileged_slices, cfg.obs.privileged_critic
+        )
         self.reset_all()
 
     # --- targets ---------------------------------------------------------------------------
@@ -187,7 +190,8 @@ class DanceEnv:
         actor = self.actor_obs.build(prop, self.targets_at, self.body_targets_at)
         groups = {"actor": actor}
         if self.cfg.obs.privileged_critic:
-            groups["critic"] = torch.cat([actor, observations.privileged(self)], dim=1)
+            privileged = [t.fn(self) for t in observations.PRIVILEGED_TERMS]
+            groups["critic"] = torch.cat([actor, *privileged], dim=1)
         else:
             groups["critic"] = actor
         if not self.compute_rewards:
@@ -210,14 +214,14 @@ class DanceEnv:
         self.robot = self._read_state(self.engine.step(self._lagged_controls()))
         self.episode_length_buf += 1
 
-        fell = terminations.fell(self)
-        time_out = terminations.time_out(self) & ~fell
+        self.fell, time_out = terminations.evaluate(self)
         self._push()
-        done = fell | time_out
+        done = self.fell | time_out
         extras: dict = {"time_outs": time_out}
         if self.compute_rewards:
-            reward, terms = self._reward(fell)
-            extras["log"] = self._log(terms, fell, done)
+            self.errors = rewards.TrackingErrors(self)  # this step's, for the terms and the log
+            reward, terms = self._reward()
+            extras["log"] = self._log(terms, done)
         else:
             reward = torch.zeros(self.num_envs, device=self.device)
         if done.any():
@@ -253,44 +257,30 @@ class DanceEnv:
         out = out if out is not None else self.engine.read()
         return state_from_arrays(out.qpos, out.qvel, out.sensordata, self.engine.layout)
 
-    def _reward(self, fell: torch.Tensor) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
-        cfg = self.cfg.rewards
+    def _reward(self) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        """The sum of the `DanceTaskCfg.rewards` terms, in order, and each term's share."""
         dt = self.cfg.step_dt_s
         total = torch.zeros(self.num_envs, device=self.device)
         terms = {}
-        table = {**rewards.TERMS, **rewards.BODY_TERMS} if self.cfg.whole_body else rewards.TERMS
-        for name, (fn, weight_attr) in table.items():
-            w = 1.0 if weight_attr is None else getattr(cfg, weight_attr)
-            if name in cfg.curriculum_terms:
-                w *= self.curriculum_scale
+        for name, term in self.cfg.rewards.items():
+            w = term.weight * self.curriculum_scale if term.curriculum else term.weight
             if w == 0.0:
                 continue
-            value = w * fn(self) * dt
+            value = w * term.fn(self, **term.params)
+            value = value * dt if term.per_step else value
             terms[name] = value
             total += value
-        terms["termination"] = cfg.termination * fell.float()
-        total += terms["termination"]
         return total, terms
 
-    def _log(self, terms: dict, fell: torch.Tensor, done: torch.Tensor) -> dict:
-        front_err = (self.robot.foot_height_m[:, :2] - self.targets_at(0)[:, :2]).abs().mean(1)
+    def _log(self, terms: dict, done: torch.Tensor) -> dict:
+        e = self.errors  # what the reward terms read, computed once
         return {
             **{f"/reward/{k}": v.mean() for k, v in terms.items()},
-            "/metrics/front_abs_err_m": front_err.mean(),
+            "/metrics/front_abs_err_m": e.front_m.abs().mean(1).mean(),
             "/metrics/rear_lift_m": self.robot.foot_height_m[:, 2:].clamp(min=0).mean(),
-            "/metrics/falls": fell.float().sum(),
-            "/metrics/body_height_err_m": (
-                self.robot.base_pos_w[:, 2]
-                - self.cfg.rewards.base_height_target_m
-                - self.body_targets_at(0)[:, 0]
-            )
-            .abs()
-            .mean(),
-            "/metrics/body_tilt_err_rad": (
-                self.robot.projected_gravity_b - rewards.target_gravity_b(self.body_targets_at(0))
-            )
-            .norm(dim=1)
-            .mean(),
+            "/metrics/falls": self.fell.float().sum(),
+            "/metrics/body_height_err_m": e.body_height_m.abs().mean(),
+            "/metrics/body_tilt_err_rad": e.body_tilt.mean(),
             "/metrics/episodes_ended": done.float().sum(),
         }
 
@@ -346,7 +336,3 @@ class DanceEnv:
         self.engine.reset(ids, qpos, qvel)
         self.robot = self._read_state()
         self.actor_obs.reset(ids, self._proprio())
-
-    @property
-    def obs_layout(self) -> dict:
-        return observations.observation_layout(self.actor_obs, self.cfg.obs.privileged_critic)

@@ -1,13 +1,26 @@
-"""Termination terms: (N,) bool."""
+"""Termination terms: one function each, ``fn(env) -> (N,)`` bool, listed in `TERMS`."""
 
 from __future__ import annotations
 
+import functools
+import operator
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import torch
 
 if TYPE_CHECKING:
     from quaddance.sim.task import DanceEnv
+
+
+@dataclass(frozen=True)
+class TerminationTerm:
+    """One way an episode ends; ``time_out``: the episode ran its length (rsl-rl bootstraps
+    the value there), else the robot failed (the `rewards.fall` term pays for it)."""
+
+    fn: Callable[[DanceEnv], torch.Tensor]
+    time_out: bool = False
 
 
 def fell(env: DanceEnv) -> torch.Tensor:
@@ -21,3 +34,18 @@ def fell(env: DanceEnv) -> torch.Tensor:
 
 def time_out(env: DanceEnv) -> torch.Tensor:
     return env.episode_length_buf >= env.max_episode_length
+
+
+#: The task's terminations by name; a time-out of an env that also failed counts as a fall.
+TERMS: dict[str, TerminationTerm] = {
+    "fell": TerminationTerm(fell),
+    "time_out": TerminationTerm(time_out, time_out=True),
+}
+
+
+def evaluate(env: DanceEnv) -> tuple[torch.Tensor, torch.Tensor]:
+    """(failed, timed out), each (N,) bool, the or of the failure and of the time-out `TERMS`;
+    an env that both failed and ran out of time failed."""
+    failed = functools.reduce(operator.or_, (t.fn(env) for t in TERMS.values() if not t.time_out))
+    timed_out = functools.reduce(operator.or_, (t.fn(env) for t in TERMS.values() if t.time_out))
+    return failed, timed_out & ~failed
