@@ -238,6 +238,7 @@ def test_init_from_an_older_checkpoint_carries_the_shared_inputs_over(trained, t
     config = json.loads(state["config_json"])
     for key in ("base_height_target_m", "curriculum_env_steps"):  # newer than those configs
         del config["task"][key]
+    config["task"]["scene"]["robot"] = {"name": "unitree_go1"}  # where some held the robot
     config["task"]["rewards"] = {"c_f": 60.0, "lambda_f": 100.0, "curriculum_terms": ["foot_slide"]}
     state["config_json"] = json.dumps(config)
     old = tmp_path / "old.pt"

@@ -294,7 +294,8 @@ class Trainer:
             raise InputFileError(path, "no such checkpoint (--init-from)")
         try:
             state = torch.load(path, map_location=self.device, weights_only=True)
-            old_task = task_from_record(json.loads(state["config_json"])["task"])
+            record = json.loads(state["config_json"])["task"]
+            old_task = task_from_record(record, self.cfg.task.scene.robot)
             old_names = ObsLayout.of(
                 ActorObservation(old_task, 1).layout,
                 self.env.privileged_slices,

@@ -166,7 +166,8 @@ def task_from_record(record: dict[str, Any], robot: RobotCfg = GO1) -> DanceTask
     were entries, whose flat ``rewards`` `quaddance.sim.tasks.rewards_from_flat` turns into
     terms)."""
     task = dict(record)
-    task.setdefault("scene", {})
+    # Checkpoints of earlier versions hold the robot in the scene; it is ``robot`` here.
+    task["scene"] = {k: v for k, v in task.get("scene", {}).items() if k != "robot"}
     parts = {
         "scene": functools.partial(SceneCfg, robot=robot),
         "domain_rand": DomainRandCfg,
