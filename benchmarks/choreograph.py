@@ -19,7 +19,8 @@ import numpy as np
 from quaddance.choreo.choreographer import choreograph
 from quaddance.choreo.grid import synthetic_grid
 from quaddance.fileio import write_json
-from quaddance.pipeline import CHOREO_FPS, target_bank
+from quaddance.layout import CHOREO_FPS
+from quaddance.pipeline import target_bank
 from quaddance.targets import TargetConfig, robot_targets
 
 

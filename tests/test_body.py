@@ -23,9 +23,9 @@ from quaddance.choreo.moves_file import load_moves
 from quaddance.cli import app
 from quaddance.dancefile import Dance, load_dance, save_dance
 from quaddance.errors import InputFileError, QuaddanceError
-from quaddance.pipeline import CHOREO_FPS, make_dance, target_bank
+from quaddance.layout import BODY_COLUMNS, CHOREO_FPS
+from quaddance.pipeline import DanceSpec, make_dance, target_bank
 from quaddance.targets import (
-    BODY_COLUMNS,
     BODY_LIMITS_FOUR_FEET,
     BODY_LIMITS_PAW_UP,
     TargetConfig,
@@ -267,7 +267,7 @@ def test_accents_and_coverage_functions():
 
 def test_demo_song_whole_body_covers_the_energetic_beats(demo_song):
     path, _ = demo_song
-    dance, analysis = make_dance(path, None, seed=0)
+    dance, analysis = make_dance(path, None, DanceSpec(seed=0))
     grid = MusicGrid.from_analysis(analysis)
     energetic = dance.beats_s[grid.energy_at(dance.beats_s) >= 0.5]
     assert energetic.size >= 8
@@ -455,6 +455,6 @@ def test_make_dance_takes_moves(tmp_path, demo_song):
     song, _ = demo_song
     path: Path = tmp_path / "moves.toml"
     path.write_text(GOOD_MOVES)
-    dance, _ = make_dance(song, None, style="wiggly", moves=load_moves(path))
+    dance, _ = make_dance(song, None, DanceSpec(style="wiggly", moves=load_moves(path)))
     assert "moves.toml" in dance.source
     assert np.ptp(dance.body_targets[:, 3]) > 0.05

@@ -28,7 +28,7 @@ from quaddance.deploy.robot import JointCommand, Reading
 from quaddance.deploy.runner import DeployOptions, Runner
 from quaddance.deploy.states import DeployState
 from quaddance.errors import QuaddanceError
-from quaddance.play.dance import target_config_for
+from quaddance.play.dance import spec_for_policy, target_config_for
 from quaddance.play.policy import OnnxPolicy, shipped_policy_path
 from quaddance.robots import GO1
 
@@ -251,9 +251,9 @@ def damp_after(summary: dict, fault: str) -> float:
 def test_sim_deploy_of_a_song_dances_through_lag_with_a_soft_start_in_torque_limits(
     policy, tmp_path, demo_song
 ):
-    from quaddance.pipeline import make_dance
+    from quaddance.pipeline import DanceSpec, make_dance
 
-    dance, _ = make_dance(demo_song[0], None, target_cfg=target_config_for(policy, "feasible"))
+    dance, _ = make_dance(demo_song[0], None, spec_for_policy(DanceSpec(), policy))
     summary, log = run_sim(policy, dance.targets_m, tmp_path, 20.0, inject=[("lag", 15.0)])
     assert set(summary) >= DEPLOY_KEYS and set(log) >= LOG_KEYS
     if summary["final_state"] != "done":

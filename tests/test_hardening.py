@@ -534,13 +534,6 @@ def test_dance_file_array_sizes_are_checked_before_allocating(tmp_path) -> None:
         load_dance(path)
 
 
-def test_dance_modes_match_the_target_modes() -> None:
-    from quaddance.dancefile import _MODES
-    from quaddance.targets import MODES
-
-    assert _MODES == MODES
-
-
 # --- the policy JSON ----------------------------------------------------------------------------
 
 

@@ -21,6 +21,7 @@ from quaddance.live.choreographer import (
     LOOKAHEAD_S,
     LiveChoreographer,
 )
+from quaddance.pipeline import DanceSpec
 from quaddance.targets import TargetConfig
 
 HZ = 50.0
@@ -38,8 +39,10 @@ def _state(now_s: float, locked: bool, period_s: float = 0.5, phase_s: float = 0
     )
 
 
-def _run(lock_from_s: float, duration_s: float, period_of=lambda t: 0.5) -> LiveChoreographer:
-    lc = LiveChoreographer(HZ, seed=3)
+def _run(
+    lock_from_s: float, duration_s: float, period_of=lambda t: 0.5, spec: DanceSpec | None = None
+) -> LiveChoreographer:
+    lc = LiveChoreographer(HZ, spec or DanceSpec(seed=3))
     for i in range(round(duration_s / 0.05)):
         now = i * 0.05
         locked = now >= lock_from_s
@@ -85,7 +88,7 @@ def test_one_front_paw_up_at_a_time_across_segment_seams(period_s):
     1 s in 40 s), and at 141 BPM the robot fell."""
     min_gap = round(TargetConfig().min_ground_s * HZ)
     for seed in range(4):
-        lc = LiveChoreographer(HZ, seed=seed)
+        lc = LiveChoreographer(HZ, DanceSpec(seed=seed))
         for i in range(round(30.0 / 0.05)):
             now = i * 0.05
             lc.update(_state(now, now >= 2.0, period_s), now)
@@ -138,7 +141,7 @@ def test_the_trunk_keeps_its_bounds_at_seams_and_back_to_calm_after_a_lost_lock(
     v_max = np.minimum(BODY_LIMITS_FOUR_FEET.max_speed, BODY_LIMITS_PAW_UP.max_speed)
     a_max = np.minimum(BODY_LIMITS_FOUR_FEET.max_accel, BODY_LIMITS_PAW_UP.max_accel)
     for seed in range(3):
-        lc = LiveChoreographer(HZ, seed=seed)
+        lc = LiveChoreographer(HZ, DanceSpec(seed=seed))
         for i in range(round(20.0 / 0.05)):
             now = i * 0.05
             lc.update(_state(now, 2.0 <= now < 12.0, period_s), now)
@@ -151,6 +154,20 @@ def test_the_trunk_keeps_its_bounds_at_seams_and_back_to_calm_after_a_lost_lock(
         assert np.ptp(body[(t > 4.0) & (t < 12.0)], axis=0).max() > 0.02  # it did dance
         # Calm again once the rows final at the loss (up to a bar and 0.7 s ahead) are danced.
         assert np.abs(body[t > 17.0]).max() < 1e-9
+
+
+def test_each_bar_is_composed_with_the_spec_s_target_limits():
+    """The planner composes each bar as every dance is composed (`pipeline.compose`), with
+    the spec's target settings: its paw height limit and its smallest lift."""
+    rows = _run(2.0, 20.0).rows
+    low = _run(2.0, 20.0, spec=DanceSpec(seed=3, targets=TargetConfig(max_height_m=0.12))).rows
+    assert rows[:, :2].max() > 0.2 and low[:, :2].max() <= 0.12 + 1e-9
+    high = _run(2.0, 20.0, spec=DanceSpec(seed=3, targets=TargetConfig(min_lift_m=0.2))).rows
+
+    def n_lifts(paws: np.ndarray) -> int:
+        return int(np.count_nonzero(np.diff((paws > 1e-3).astype(np.int8), axis=0) == 1))
+
+    assert n_lifts(high[:, :2]) < n_lifts(rows[:, :2])  # the low lifts are gone
 
 
 def test_a_tempo_change_is_followed_bar_by_bar():
@@ -266,15 +283,12 @@ def test_the_listener_tells_the_tracker_whether_music_may_already_be_playing(
     monkeypatch.setattr(online_beats, "OnlineBeatTracker", Tracker)
     monkeypatch.setattr(music_live, "FileSource" if from_file else "MicSource", Source)
     monkeypatch.setattr(session, "ignore_sigint", lambda: None)  # not in pytest's process
-    cfg = TargetConfig()
     spec = {
         "from_file": "song.wav" if from_file else None,
         "start_s": start_s,
         "device": None,
         "policy_hz": HZ,
-        "target_cfg": {f: getattr(cfg, f) for f in cfg.__dataclass_fields__},
-        "seed": 0,
-        "style": "mixed",
+        "dance": DanceSpec(),
     }
     out: queue.Queue = queue.Queue()
     go = threading.Event()

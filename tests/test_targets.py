@@ -13,12 +13,13 @@ import pytest
 from typer.testing import CliRunner
 
 import quaddance.choreo.motion as motion_module
+from quaddance.choreo.body import MoveSet
 from quaddance.choreo.choreographer import choreograph
 from quaddance.choreo.grid import synthetic_grid
 from quaddance.cli import app
 from quaddance.dancefile import KEYS, OPTIONAL_KEYS, Dance, load_dance, save_dance
 from quaddance.errors import InputFileError, QuaddanceError
-from quaddance.pipeline import make_dance, target_bank
+from quaddance.pipeline import DanceSpec, compose, make_dance, target_bank
 from quaddance.targets import TargetConfig, robot_targets
 
 OUT_FPS = 50.0
@@ -363,13 +364,15 @@ def fake_analysis(duration_s: float = 20.0) -> SimpleNamespace:
 
 def test_make_dance_from_analysis(tmp_path):
     analysis = fake_analysis()
-    dance, used = make_dance(None, None, mode="feasible", seed=2, analysis=analysis)
+    dance, used = make_dance(None, None, DanceSpec(seed=2), analysis=analysis)
     assert used is analysis
     assert dance.fps == 50.0 and dance.targets_m.shape == (1000, 4)
     assert dance.human_feet_m.shape == (1000, 2)
     np.testing.assert_array_equal(dance.beats_s, analysis.beats_s)
     check_feasible(dance.time_s, dance.targets_m, TargetConfig())
-    paper, _ = make_dance(None, None, mode="paper", seed=2, analysis=analysis)
+    paper, _ = make_dance(
+        None, None, DanceSpec(seed=2, targets=TargetConfig(mode="paper")), analysis=analysis
+    )
     assert paper.mode == "paper"
     np.testing.assert_allclose(paper.targets_m.max(), 2.0, rtol=0.02)
     # The same human dance drives both: the paper targets are 2 m / max times it.
@@ -384,13 +387,34 @@ def test_make_dance_from_motion(monkeypatch, tmp_path):
     feet = np.column_stack([bump(t, 2.0, 0.3, 0.3), bump(t, 5.0, 0.25, 0.3)])
     human = SimpleNamespace(fps=fps, feet_m=feet, source="edge.pkl (EDGE)")
     monkeypatch.setattr(motion_module, "load_motion", lambda path: human)
-    dance, analysis = make_dance(None, tmp_path / "edge.pkl", mode="minmax")
+    dance, analysis = make_dance(
+        None, tmp_path / "edge.pkl", DanceSpec(targets=TargetConfig(mode="minmax"))
+    )
     assert analysis is None and dance.beats_s.size == 0
     assert dance.source == "edge.pkl (EDGE)" and dance.mode == "minmax"
     assert dance.targets_m.shape == (500, 4)
     np.testing.assert_allclose(dance.targets_m[:, :2].max(axis=0), [1.0, 1.0], atol=0.01)
     with pytest.raises(QuaddanceError):
         make_dance(None, None)
+
+
+def test_a_dance_spec_names_a_known_style():
+    with pytest.raises(QuaddanceError, match="ballet"):
+        DanceSpec(style="ballet")
+    assert DanceSpec(style="wiggly", moves=MoveSet(styles={"wiggly": {}})).mode == "feasible"
+
+
+def test_compose_without_the_trunk_keeps_the_paws():
+    """A paws-only dance (the bank of a paws-only policy) has the paws of the whole-body one
+    and a still trunk."""
+    grid = synthetic_grid(110.0, 12.0, np.random.default_rng(0))
+    spec = DanceSpec(seed=1, targets=TargetConfig(mode="paper"))
+    full = compose(spec, grid)
+    paws = compose(spec, grid, whole_body=False)
+    assert full.mode == paws.mode == "paper"
+    np.testing.assert_array_equal(paws.targets_m, full.targets_m)
+    assert full.body_targets.any() and not paws.body_targets.any()
+    assert set(full.clamp_report) == {"paw", "body"} and set(paws.clamp_report) == {"paw"}
 
 
 def test_cli_needs_song_or_motion(tmp_path):

@@ -21,7 +21,7 @@ body_targets   (T, 4)       trunk height offset m, roll, pitch, yaw rad (format 
 format         () int       dance format: 2 (missing in format 1 files)
 =============  ===========  =====================================================
 
-`Dance.clamp_report` (what feasible mode clamped, from `quaddance.pipeline.make_dance`) is
+`Dance.clamp_report` (what feasible mode clamped, from `quaddance.pipeline.compose`) is
 not stored.
 """
 
@@ -38,6 +38,7 @@ import numpy as np
 
 from quaddance.errors import InputFileError
 from quaddance.fileio import atomic_path
+from quaddance.layout import MODES, N_BODY, N_PAWS
 
 # What a damaged archive raises: zipfile and zlib errors, NotImplementedError (unknown
 # compression method), RuntimeError (encrypted member), struct.error (cut headers), and from
@@ -47,7 +48,6 @@ _ARCHIVE_ERRORS = (
     OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError,
     RuntimeError, struct.error, SyntaxError, tokenize.TokenError,
 )  # fmt: skip
-_MODES = ("feasible", "paper", "minmax")  # quaddance.targets.MODES (not imported: keep this light)
 
 KEYS: tuple[str, ...] = (
     "fps",
@@ -66,8 +66,7 @@ _STRING_KEYS = ("mode", "source", "version")
 OPTIONAL_KEYS: tuple[str, ...] = ("body_targets", "format")
 #: Dance format written: 1 = feet only, 2 = adds ``body_targets`` (T, 4).
 FORMAT_VERSION = 2
-#: Largest |trunk height offset|, m, and |trunk angle|, rad, read from ``body_targets``
-#: (the same values as `quaddance.targets.BODY_FILE_MAX_*`, not imported: keep this light).
+#: Largest |trunk height offset|, m, and |trunk angle|, rad, read from ``body_targets``.
 MAX_BODY_HEIGHT_M = 0.2
 MAX_BODY_ANGLE_RAD = 1.0
 
@@ -103,8 +102,8 @@ class Dance:
         seed: choreographer seed.
         version: quaddance version that made it.
         body_targets: (T, 4) trunk targets relative to standing: height offset (m), roll,
-            pitch, yaw (rad); `quaddance.targets.BODY_COLUMNS`. None -> zeros.
-        clamp_report: what feasible mode clamped (`make_dance`), or None; not saved.
+            pitch, yaw (rad); `quaddance.layout.BODY_COLUMNS`. None -> zeros.
+        clamp_report: what feasible mode clamped (`compose`), or None; not saved.
     """
 
     fps: float
@@ -122,7 +121,7 @@ class Dance:
 
     def __post_init__(self) -> None:
         if self.body_targets is None:
-            self.body_targets = np.zeros((np.asarray(self.time_s).size, 4))
+            self.body_targets = np.zeros((np.asarray(self.time_s).size, N_BODY))
 
     @property
     def duration_s(self) -> float:
@@ -266,16 +265,18 @@ def _check(path: Path, raw: dict[str, np.ndarray]) -> Dance:
     if human.shape != (n, 2):
         raise InputFileError(path, f"human_feet_m must have shape ({n}, 2), got {human.shape}")
     targets = curve("targets_m", 2, -MAX_HEIGHT_M, MAX_HEIGHT_M)
-    if targets.shape != (n, 4):
-        raise InputFileError(path, f"targets_m must have shape ({n}, 4), got {targets.shape}")
+    if targets.shape != (n, N_PAWS):
+        raise InputFileError(
+            path, f"targets_m must have shape ({n}, {N_PAWS}), got {targets.shape}"
+        )
     beats = {}
     for key in ("beats_s", "downbeats_s"):
         beats[key] = curve(key, 1, -MAX_DANCE_S, 2 * MAX_DANCE_S)
         if beats[key].size > 1 and np.any(np.diff(beats[key]) < 0):
             raise InputFileError(path, f"{key} is not in time order")
     mode = text("mode")
-    if mode not in _MODES:
-        raise InputFileError(path, f"mode must be one of {', '.join(_MODES)}, got {mode!r}")
+    if mode not in MODES:
+        raise InputFileError(path, f"mode must be one of {', '.join(MODES)}, got {mode!r}")
     seed = int(number("seed", "iu"))
     if not 0 <= seed < 2**63:
         raise InputFileError(path, f"seed must be in [0, 2**63), got {seed}")
@@ -285,11 +286,13 @@ def _check(path: Path, raw: dict[str, np.ndarray]) -> Dance:
             raise InputFileError(
                 path, f"format {fmt} is not one this quaddance reads (1 to {FORMAT_VERSION})"
             )
-    body = np.zeros((n, 4))
+    body = np.zeros((n, N_BODY))
     if "body_targets" in raw:
         body = curve("body_targets", 2, -MAX_BODY_ANGLE_RAD, MAX_BODY_ANGLE_RAD)
-        if body.shape != (n, 4):
-            raise InputFileError(path, f"body_targets must have shape ({n}, 4), got {body.shape}")
+        if body.shape != (n, N_BODY):
+            raise InputFileError(
+                path, f"body_targets must have shape ({n}, {N_BODY}), got {body.shape}"
+            )
         height = np.abs(body[:, 0]).max(initial=0.0)
         if height > MAX_BODY_HEIGHT_M:
             raise InputFileError(

@@ -1,14 +1,20 @@
-"""Song or motion file -> `Dance` (and the ``choreograph`` command's job and tables); and a
-bank of synthetic target sequences for training.
+"""The dance composer: one `DanceSpec` and the music (or a human motion) in, a `Dance` out.
 
-`make_dance` imports the audio stack only when it has a song to analyse; `target_bank` never
-does, so it runs on a training machine without librosa.
+`compose` is the one chain that makes a dance: choreograph the human dance (paws and trunk)
+on a `MusicGrid`, or take a motion file's, then turn it into robot targets the policy can
+follow (`targets.robot_targets`, `targets.feasible_body_targets`). Every dance is made by it:
+`quaddance choreograph`, `dance` and `deploy` through `make_dance` (a song or motion file),
+the training bank (`target_bank`, synthetic songs) and the live planner (a grid of the next
+bar's predicted beats). The ``choreograph`` command's job and tables are here too.
+
+`make_dance` imports the audio stack only when it has a song to analyse; the rest never
+does, so the bank builds on a training machine without librosa.
 """
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -21,10 +27,18 @@ from quaddance.choreo.grid import MusicGrid, synthetic_grid
 from quaddance.dancefile import Dance, save_dance
 from quaddance.errors import InputFileError, QuaddanceError
 from quaddance.fileio import check_output_file
-from quaddance.targets import (
+from quaddance.layout import (
+    BODY,
     BODY_COLUMNS,
-    TargetConfig,
+    CHOREO_FPS,
+    FRONT_PAWS,
+    N_BODY,
+    PAWS,
     TargetMode,
+    row_width,
+)
+from quaddance.targets import (
+    TargetConfig,
     feasible_body_targets,
     fit_body,
     paw_clamp_report,
@@ -33,99 +47,151 @@ from quaddance.targets import (
 )
 
 if TYPE_CHECKING:
+    from quaddance.choreo.motion import HumanMotion
     from quaddance.music.analysis import Analysis
 
-#: Rate at which the built-in choreographer writes human foot heights, Hz (AIST++ rate).
-CHOREO_FPS = 60.0
 #: Tempo range of the training bank, BPM: dance music is mostly 80-135 (AIST++ 80-130),
 #: widened so that octave errors of a beat tracker stay inside what the policy has seen.
 BANK_TEMPO_BPM = (80.0, 160.0)
 
 
-def make_dance(
-    song: Path | None,
-    motion: Path | None,
-    mode: TargetMode = "feasible",
-    seed: int = 0,
-    target_cfg: TargetConfig | None = None,
-    analysis: Analysis | Any | None = None,
-    style: str = "mixed",
-    moves: MoveSet | None = None,
-) -> tuple[Dance, Analysis | None]:
-    """Make a dance from a song (built-in choreographer) or from a human motion file.
+@dataclass(frozen=True)
+class DanceSpec:
+    """Which dance to make of the music: everything that decides it but the music itself.
 
-    Parameters:
-        song: audio file; analysed unless ``analysis`` is given. With ``motion`` it only
-            supplies beat times (stored in the dance, used to snap feasible targets).
-        motion: a human motion file (see `quaddance.choreo.motion`); if given, its foot
-            heights are danced instead of the choreographer's.
-        mode: target mode; it overrides ``target_cfg.mode``.
-        seed: choreographer seed.
-        target_cfg: the other target settings; default `TargetConfig()`.
-        analysis: a ready `quaddance.music.analysis.Analysis` of ``song``.
-        style: choreographer style, a key of `quaddance.choreo.choreographer.STYLES` (or
-            of the ``moves`` file's styles).
+    Attributes:
+        style: choreographer style, a key of `quaddance.choreo.choreographer.STYLES` (or of
+            ``moves``' styles).
+        seed: choreographer seed: another seed, another dance.
         moves: body moves and styles of a ``--moves`` file
             (`quaddance.choreo.moves_file.load_moves`); None: the built-in ones.
+        targets: how the human dance becomes robot targets: the mode (`mode`), the paw
+            limits, the output rate (the trunk's limits are `quaddance.targets`').
+    """
+
+    style: str = "mixed"
+    seed: int = 0
+    moves: MoveSet | None = None
+    targets: TargetConfig = field(default_factory=TargetConfig)
+
+    def __post_init__(self) -> None:
+        names = (self.moves or MoveSet()).style_names
+        if self.style not in names:
+            raise QuaddanceError(
+                f"unknown choreography style {self.style!r}; choose one of {sorted(names)}"
+            )
+
+    @property
+    def mode(self) -> TargetMode:
+        """The target mode (`quaddance.layout.MODES`)."""
+        return self.targets.mode
+
+
+def compose(
+    spec: DanceSpec,
+    grid: MusicGrid | None = None,
+    motion: HumanMotion | None = None,
+    music_name: str = "the music",
+    whole_body: bool = True,
+) -> Dance:
+    """The dance of ``spec`` on ``grid``, or of a human ``motion``.
+
+    Parameters:
+        spec: which dance (style, seed, moves, targets).
+        grid: the music: the built-in choreographer dances to it; with ``motion`` it only
+            supplies the beats (stored in the dance, used to snap feasible targets).
+        motion: a human dance (`quaddance.choreo.motion.HumanMotion`) to dance instead of
+            the choreographer's; a motion without a trunk dances with a still one.
+        music_name: what the music is called in ``dance.source``.
+        whole_body: False: paw targets only, for a paws-only policy; the trunk's dance is
+            skipped (``body_targets`` zeros).
 
     Returns:
-        The `Dance` (curves at ``cfg.out_fps``) and the song's analysis (None without a song).
-        ``dance.body_targets`` are the trunk targets (the choreographer's body moves, or the
-        motion's pelvis, scaled by `fit_body`), made feasible by `feasible_body_targets` in
-        every mode. ``dance.clamp_report`` (not saved) says what was clamped:
-        ``{"paw": paw_clamp_report(...), "body": feasible_body_targets' report}``.
+        The `Dance` at ``spec.targets.out_fps``. Its ``body_targets`` are the trunk targets
+        (the choreographer's body moves, or the motion's pelvis scaled by `fit_body`), made
+        feasible by `feasible_body_targets` in every mode. ``dance.clamp_report`` (not
+        saved) says what was clamped: ``{"paw": paw_clamp_report(...), "body":
+        feasible_body_targets' report}`` (no ``"body"`` without ``whole_body``).
     """
-    if song is None and motion is None and analysis is None:
-        raise QuaddanceError("give a song, a motion file, or both")
-    cfg = dataclasses.replace(target_cfg or TargetConfig(), mode=mode)
-    if analysis is None and song is not None:
-        from quaddance.music.analysis import analyze_file
-
-        analysis = analyze_file(song)
-    song_name = Path(song).name if song is not None else "analysis"
-
+    cfg = spec.targets
     if motion is not None:
-        from quaddance.choreo.motion import load_motion
-
-        human = load_motion(motion)
-        feet_m, fps = np.asarray(human.feet_m, dtype=np.float64), float(human.fps)
+        feet_m, fps = np.asarray(motion.feet_m, dtype=np.float64), float(motion.fps)
         # Motions without a trunk (or stand-ins that carry only feet) dance with a still body.
-        trunk = getattr(human, "body", None)
-        body = fit_body(trunk) if trunk is not None else np.zeros((feet_m.shape[0], 4))
-        source = human.source if analysis is None else f"{human.source}; beats of {song_name}"
-    else:
-        grid = MusicGrid.from_analysis(analysis)
-        feet_m = choreograph(grid, seed=seed, fps=CHOREO_FPS, style=style, moves=moves)
+        trunk = getattr(motion, "body", None)
+        body = fit_body(trunk) if trunk is not None else np.zeros((feet_m.shape[0], N_BODY))
+        source = motion.source if grid is None else f"{motion.source}; beats of {music_name}"
+    elif grid is not None:
         fps = CHOREO_FPS
-        body = choreograph_body(grid, feet_m, fps, seed=seed, style=style, moves=moves)
-        source = f"choreographer (style {style}, seed {seed}) on {song_name}"
-        if moves is not None and moves.source != "built-in":
-            source += f", moves {moves.source}"
+        feet_m = choreograph(grid, seed=spec.seed, fps=fps, style=spec.style, moves=spec.moves)
+        body = None
+        if whole_body:
+            body = choreograph_body(
+                grid, feet_m, fps, seed=spec.seed, style=spec.style, moves=spec.moves
+            )
+        source = f"choreographer (style {spec.style}, seed {spec.seed}) on {music_name}"
+        if spec.moves is not None and spec.moves.source != "built-in":
+            source += f", moves {spec.moves.source}"
+    else:
+        raise QuaddanceError("give a song, a motion file, or both")
 
-    beats_s = np.asarray(analysis.beats_s if analysis is not None else [], dtype=np.float64)
-    downbeats_s = np.asarray(analysis.downbeats_s if analysis is not None else [], dtype=np.float64)
+    empty = np.zeros(0)
+    beats_s = grid.beats_s if grid is not None else empty
     time_s, targets_m = robot_targets(feet_m, fps, beats_s, cfg)
-    body_targets, body_report = feasible_body_targets(
-        body, fps, time_s, targets_m, min_lift_m=cfg.min_lift_m
-    )
-    dance = Dance(
+    report = {"paw": paw_clamp_report(feet_m, fps, targets_m, cfg)}
+    body_targets = None
+    if whole_body:
+        body_targets, report["body"] = feasible_body_targets(
+            body, fps, time_s, targets_m, min_lift_m=cfg.min_lift_m
+        )
+    return Dance(
         fps=cfg.out_fps,
         time_s=time_s,
         human_feet_m=resample(feet_m, fps, time_s),
         targets_m=targets_m,
         beats_s=beats_s,
-        downbeats_s=downbeats_s,
+        downbeats_s=grid.downbeats_s if grid is not None else empty,
         mode=cfg.mode,
         source=source,
-        seed=int(seed),
+        seed=int(spec.seed),
         version=quaddance.__version__,
         body_targets=body_targets,
-        clamp_report={
-            "paw": paw_clamp_report(feet_m, fps, targets_m, cfg),
-            "body": body_report,
-        },
+        clamp_report=report,
     )
-    return dance, analysis
+
+
+def make_dance(
+    song: Path | None,
+    motion: Path | None,
+    spec: DanceSpec | None = None,
+    analysis: Analysis | Any | None = None,
+) -> tuple[Dance, Analysis | None]:
+    """`compose` a dance from a song (built-in choreographer) or from a human motion file.
+
+    Parameters:
+        song: audio file; analysed unless ``analysis`` is given. With ``motion`` it only
+            supplies beat times.
+        motion: a human motion file (see `quaddance.choreo.motion`); if given, its foot
+            heights and trunk are danced instead of the choreographer's.
+        spec: which dance; default `DanceSpec()`.
+        analysis: a ready `quaddance.music.analysis.Analysis` of ``song``.
+
+    Returns:
+        The `Dance` and the song's analysis (None without a song).
+    """
+    if song is None and motion is None and analysis is None:
+        raise QuaddanceError("give a song, a motion file, or both")
+    if analysis is None and song is not None:
+        from quaddance.music.analysis import analyze_file
+
+        analysis = analyze_file(song)
+    human = None
+    if motion is not None:
+        from quaddance.choreo.motion import load_motion
+
+        human = load_motion(motion)
+    grid = MusicGrid.from_analysis(analysis) if analysis is not None else None
+    music_name = Path(song).name if song is not None else "analysis"
+    return compose(spec or DanceSpec(), grid, human, music_name), analysis
 
 
 def target_bank(
@@ -154,7 +220,7 @@ def target_bank(
         raise QuaddanceError(f"target bank duration_s must be > 0, got {duration_s}")
     cfg = cfg or TargetConfig()
     n_out = int(np.ceil(duration_s * cfg.out_fps - 1e-9))
-    bank = np.zeros((n, n_out, 8 if body else 4), dtype=np.float32)
+    bank = np.zeros((n, n_out, row_width(body)), dtype=np.float32)
     rng = np.random.default_rng(seed)
     styles = sorted(STYLES)
     for i in range(n):
@@ -163,23 +229,18 @@ def target_bank(
         beats_per_bar = 3 if rng.random() < 0.1 else 4
         grid = synthetic_grid(tempo_bpm, duration_s, rng, swing=swing, beats_per_bar=beats_per_bar)
         style = styles[int(rng.integers(len(styles)))]
-        dance_seed = int(rng.integers(2**31))
-        feet_m = choreograph(grid, seed=dance_seed, fps=CHOREO_FPS, style=style)
-        time_s, targets_m = robot_targets(feet_m, CHOREO_FPS, grid.beats_s, cfg)
-        m = min(n_out, targets_m.shape[0])
-        bank[i, :m, :4] = targets_m[:m]
+        spec = DanceSpec(style=style, seed=int(rng.integers(2**31)), targets=cfg)
+        dance = compose(spec, grid, whole_body=body)
+        m = min(n_out, dance.targets_m.shape[0])
+        bank[i, :m, PAWS] = dance.targets_m[:m]
         if body:
-            trunk = choreograph_body(grid, feet_m, CHOREO_FPS, seed=dance_seed, style=style)
-            trunk, _ = feasible_body_targets(
-                trunk, CHOREO_FPS, time_s, targets_m, min_lift_m=cfg.min_lift_m
-            )
-            bank[i, :m, 4:] = trunk[:m]
+            bank[i, :m, BODY] = dance.body_targets[:m]
         if progress is not None:
             progress(i)
     return bank
 
 
-@dataclasses.dataclass(frozen=True)
+@dataclass(frozen=True)
 class ChoreographJob:
     """A dance to make and save (``quaddance choreograph``).
 
@@ -187,57 +248,29 @@ class ChoreographJob:
         song: audio file, or None with ``motion``.
         motion: human motion file to dance instead of the choreographer's, or None.
         out: where to write the dance (.npz); unused with ``check``.
-        mode: target mode (`quaddance.targets.MODES`).
-        h0_m: paper mode's h0 (eq. 4), m.
-        scale: minmax mode's scale s.
-        max_height_m: feasible mode's highest front-foot target, m; None: `TargetConfig`'s.
-        seed: choreographer seed.
-        style: choreographer style.
-        moves: TOML file of extra body moves and styles, or None.
+        spec: which dance.
         check: only make the dance (to report what feasible targets clamp); write nothing.
     """
 
     song: Path | None
     motion: Path | None
     out: Path
-    mode: TargetMode = "feasible"
-    h0_m: float = 2.0
-    scale: float = 1.0
-    max_height_m: float | None = None
-    seed: int = 0
-    style: str = "mixed"
-    moves: Path | None = None
+    spec: DanceSpec = field(default_factory=DanceSpec)
     check: bool = False
 
 
 def run_choreograph(job: ChoreographJob) -> tuple[Dance, Analysis | None]:
     """Make ``job``'s dance with `make_dance` and save it to ``job.out`` (unless ``job.check``).
 
-    The inputs, the moves file and the output path are checked before the work, so that a bad
-    one fails in a moment. Returns the dance and the song's analysis (None without a song).
+    The inputs and the output path are checked before the work, so that a bad one fails in a
+    moment. Returns the dance and the song's analysis (None without a song).
     """
     for path in (job.song, job.motion):
         if path is not None and not path.is_file():
             raise InputFileError(path, "no such file")
-    move_set = None
-    if job.moves is not None:
-        from quaddance.choreo.moves_file import load_moves
-
-        move_set = load_moves(job.moves)
     if not job.check:
         check_output_file(job.out)
-    cfg = TargetConfig(mode=job.mode, h0_m=job.h0_m, scale=job.scale)
-    if job.max_height_m is not None:
-        cfg = dataclasses.replace(cfg, max_height_m=job.max_height_m)
-    dance, analysis = make_dance(
-        job.song,
-        job.motion,
-        mode=job.mode,
-        seed=job.seed,
-        target_cfg=cfg,
-        style=job.style,
-        moves=move_set,
-    )
+    dance, analysis = make_dance(job.song, job.motion, job.spec)
     if not job.check:
         save_dance(job.out, dance)
     return dance, analysis
@@ -248,7 +281,7 @@ def dance_table(dance: Dance, analysis: Analysis | None, out: Path) -> Any:
     lifts and heights, and the trunk's range."""
     from rich.table import Table
 
-    front = dance.targets_m[:, :2]
+    front = dance.targets_m[:, FRONT_PAWS]
     up = front > 0
     n_lifts = [
         int(np.count_nonzero(np.diff(up[:, k].astype(np.int8)) == 1) + up[0, k]) for k in (0, 1)
@@ -274,7 +307,7 @@ def dance_table(dance: Dance, analysis: Analysis | None, out: Path) -> Any:
 
 
 def clamp_table(dance: Dance) -> Any:
-    """A rich table of ``dance.clamp_report`` (`make_dance`): what feasible targets clamped
+    """A rich table of ``dance.clamp_report`` (`compose`): what feasible targets clamped
     (paw lifts dropped, merged or clipped; trunk samples per body column), and by how much."""
     from rich.table import Table
 

@@ -17,19 +17,19 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 
-from quaddance.choreo.choreographer import MIN_JERK_PEAK_SPEED, LiftPlan, min_jerk, render_lifts
 from quaddance.errors import QuaddanceError
+from quaddance.layout import BODY_COLUMNS, FRONT_PAWS, MODES, N_PAWS, TargetMode
+from quaddance.lifts import (
+    MIN_JERK_PEAK_ACCEL,
+    MIN_JERK_PEAK_SPEED,
+    LiftPlan,
+    min_jerk,
+    render_lifts,
+)
 from quaddance.robots import GO1, BodyLimits
-
-TargetMode = Literal["feasible", "paper", "minmax"]
-MODES: tuple[str, ...] = ("feasible", "paper", "minmax")
-
-#: Peak |acceleration| of a minimum-jerk move of height h over duration d is this * h / d^2.
-MIN_JERK_PEAK_ACCEL = 10.0 / np.sqrt(3.0)
 
 
 @dataclass(frozen=True)
@@ -140,17 +140,19 @@ def robot_targets(
     beats = beats[np.isfinite(beats)]
 
     t_s = output_times(feet.shape[0], human_fps, cfg.out_fps)
-    targets = np.zeros((t_s.size, 4))
+    targets = np.zeros((t_s.size, N_PAWS))
     if cfg.mode == "paper":
         peak = feet.max()
         if peak > 0:
-            targets[:, :2] = resample(cfg.h0_m * feet / peak, human_fps, t_s)
+            targets[:, FRONT_PAWS] = resample(cfg.h0_m * feet / peak, human_fps, t_s)
     elif cfg.mode == "minmax":
         lo, hi = feet.min(axis=0), feet.max(axis=0)
         span = np.where(hi - lo > 0, hi - lo, np.inf)  # a flat foot maps to 0
-        targets[:, :2] = resample(cfg.scale * (feet - lo) / span, human_fps, t_s)
+        targets[:, FRONT_PAWS] = resample(cfg.scale * (feet - lo) / span, human_fps, t_s)
     else:
-        targets[:, :2] = render_lifts(t_s, feasible_lifts(feet, human_fps, beats, cfg, t_s[-1]))
+        targets[:, FRONT_PAWS] = render_lifts(
+            t_s, feasible_lifts(feet, human_fps, beats, cfg, t_s[-1])
+        )
     return t_s, targets
 
 
@@ -345,12 +347,6 @@ def _fit_in_time(lifts: list[_Lift], cfg: TargetConfig, end_s: float) -> list[_L
 
 # --- body (trunk) targets ---------------------------------------------------------------------
 
-#: Columns of every body-target array (T, 4), relative to the standing pose.
-BODY_COLUMNS: tuple[str, ...] = ("height_offset_m", "roll_rad", "pitch_rad", "yaw_rad")
-#: Largest |height offset| a dance file may hold, m, and largest |angle|, rad (file checks).
-BODY_FILE_MAX_HEIGHT_M = 0.2
-BODY_FILE_MAX_ANGLE_RAD = 1.0
-
 
 #: Trunk range with all four feet on the ground, and while a front paw target is above
 #: `TargetConfig.min_lift_m`: the default robot's (`RobotCfg.body_four_feet`, `body_paw_up`).
@@ -391,7 +387,7 @@ def _paw_up_weight(time_s: np.ndarray, paw_targets_m: np.ndarray | None, min_lif
     n = time_s.size
     if paw_targets_m is None or n == 0:
         return np.zeros(n)
-    up = np.asarray(paw_targets_m, dtype=np.float64)[:, :2].max(axis=1) > min_lift_m
+    up = np.asarray(paw_targets_m, dtype=np.float64)[:, FRONT_PAWS].max(axis=1) > min_lift_m
     if not up.any():
         return np.zeros(n)
     # Distance in time to the nearest paw-up sample, both directions.
@@ -528,7 +524,7 @@ def paw_clamp_report(
         "dropped_or_merged": max(int(sizes.size) - robot, 0),
         "clipped_to_max_height": clipped,
         "max_height_m": float(cfg.max_height_m),
-        "highest_target_m": float(np.max(targets_m[:, :2], initial=0.0)),
+        "highest_target_m": float(np.max(targets_m[:, FRONT_PAWS], initial=0.0)),
     }
 
 

@@ -26,6 +26,7 @@ import torch
 from quaddance import __version__
 from quaddance.errors import InputFileError, QuaddanceError
 from quaddance.fileio import atomic_path
+from quaddance.layout import row_width
 from quaddance.play.policy_spec import FORMAT
 from quaddance.sim import tasks
 from quaddance.sim.config import DanceTaskCfg, task_record
@@ -126,7 +127,7 @@ def build_bank(cfg: TrainCfg, progress=None) -> np.ndarray:
     from quaddance.pipeline import target_bank
 
     path = cfg.run_dir / "bank.npy"
-    width = 8 if cfg.task.whole_body else 4  # paw targets, then body targets
+    width = row_width(cfg.task.whole_body)
     if path.exists():
         bank = np.load(path, allow_pickle=False)
         if bank.ndim == 3 and bank.shape[2] == width:

@@ -2,7 +2,7 @@
 
 Body motion is data, like the paw moves of `quaddance.choreo.choreographer`: a `BodyMove`
 lasts ``n_beats`` beats and is made of `Gesture` s, each driving one trunk column
-(`quaddance.targets.BODY_COLUMNS`: height offset m, roll, pitch, yaw rad) with hits every
+(`quaddance.layout.BODY_COLUMNS`: height offset m, roll, pitch, yaw rad) with hits every
 ``every_beats`` beats. Two shapes:
 
 - ``"dip"``: from rest to the amplitude and back around each hit (bounce, nod);
@@ -32,11 +32,13 @@ from typing import Literal
 
 import numpy as np
 
-from quaddance.choreo.choreographer import MIN_JERK_PEAK_SPEED, STYLES, min_jerk
+from quaddance.choreo.choreographer import MOVES, STYLES
 from quaddance.choreo.grid import MusicGrid, _moving_average
 from quaddance.errors import QuaddanceError
+from quaddance.layout import BODY_COLUMNS
+from quaddance.lifts import MIN_JERK_PEAK_ACCEL, MIN_JERK_PEAK_SPEED, min_jerk
 from quaddance.robots import BodyLimits
-from quaddance.targets import BODY_COLUMNS, BODY_LIMITS_FOUR_FEET, MIN_JERK_PEAK_ACCEL
+from quaddance.targets import BODY_LIMITS_FOUR_FEET
 
 #: Amplitude factor on a downbeat ("one" gets a bigger gesture).
 DOWNBEAT_BOOST = 1.3
@@ -163,6 +165,17 @@ class MoveSet:
     @property
     def style_names(self) -> set[str]:
         return set(BODY_STYLES) | set(STYLES) | set(self.styles)
+
+    def paw_styles(self) -> dict[str, dict[str, float]]:
+        """The paw styles in use: the built-in ones and the paw part of this set's styles (a
+        style here may also be a built-in name: it then replaces that style's paw weights
+        only where it names a paw move)."""
+        styles = dict(STYLES)
+        paw_names = {m.name for m in MOVES}
+        for name, weights in self.styles.items():
+            paw = {k: v for k, v in weights.items() if k in paw_names}
+            styles[name] = paw or styles.get(name, {})
+        return styles
 
 
 @dataclass

@@ -28,6 +28,7 @@ import numpy as np
 
 from quaddance.choreo.grid import MusicGrid
 from quaddance.errors import QuaddanceError
+from quaddance.lifts import MIN_JERK_PEAK_SPEED, LiftPlan, render_lifts
 
 if TYPE_CHECKING:
     from quaddance.choreo.body import MoveSet
@@ -44,8 +45,6 @@ MIN_PHASE_S = 0.03
 DOWNBEAT_ACCENT = 1.3
 #: Weight factor of the section's signature move: dances repeat a motif within a section.
 SIGNATURE_BOOST = 3.0
-#: Peak speed of a minimum-jerk move of height h over duration d is this times h / d.
-MIN_JERK_PEAK_SPEED = 1.875
 
 
 @dataclass(frozen=True)
@@ -150,50 +149,6 @@ STYLES: dict[str, dict[str, float]] = {
     "energetic": {"hold": 0.3, "tap_rest": 0.3, "run": 2.0, "kick_step": 2.0, "knee_lift": 2.0},
     "footwork": {"run": 3.0, "pickup": 2.0, "step_pair": 2.0, "knee_lift": 0.3, "kick_step": 0.5},
 }
-
-
-@dataclass
-class LiftPlan:
-    """Lifts as parallel (N,) arrays, in time order: which foot (0 = left, 1 = right), the
-    peak time (s), peak height (m), and the rise and fall durations (s)."""
-
-    foot: np.ndarray
-    peak_s: np.ndarray
-    height_m: np.ndarray
-    rise_s: np.ndarray
-    fall_s: np.ndarray
-
-    def __len__(self) -> int:
-        return int(self.peak_s.size)
-
-
-def min_jerk(u: np.ndarray) -> np.ndarray:
-    """Minimum-jerk blend 10u^3 - 15u^4 + 6u^5 for u in [0, 1]: from 0 to 1 with zero
-    velocity and acceleration at both ends. Peak slope 1.875, peak |curvature| 10/sqrt(3)."""
-    return u * u * u * (10.0 + u * (-15.0 + 6.0 * u))
-
-
-def render_lifts(t_s: np.ndarray, plan: LiftPlan, n_feet: int = 2) -> np.ndarray:
-    """Sample lift bumps at the sorted times ``t_s`` (T,), s. Returns (T, n_feet) heights, m.
-
-    Each lift rises from 0 at ``peak - rise`` to its height at ``peak`` and falls back to 0
-    at ``peak + fall``, both along `min_jerk`; heights are exactly 0 elsewhere. The lifts of
-    one foot must not overlap (later ones would overwrite earlier ones).
-    """
-    t_s = np.asarray(t_s, dtype=np.float64)
-    out = np.zeros((t_s.size, n_feet))
-    if len(plan) == 0 or t_s.size == 0:
-        return out
-    lo = np.searchsorted(t_s, plan.peak_s - plan.rise_s, side="left")
-    hi = np.searchsorted(t_s, plan.peak_s + plan.fall_s, side="right")
-    counts = hi - lo
-    ev = np.repeat(np.arange(len(plan)), counts)
-    first = np.repeat(np.cumsum(counts) - counts, counts)
-    idx = np.arange(ev.size) - first + np.repeat(lo, counts)
-    dt = t_s[idx] - plan.peak_s[ev]
-    u = np.where(dt < 0, 1.0 + dt / plan.rise_s[ev], 1.0 - dt / plan.fall_s[ev])
-    out[idx, plan.foot[ev]] = plan.height_m[ev] * min_jerk(np.clip(u, 0.0, 1.0))
-    return out
 
 
 def _grid_fingerprint(grid: MusicGrid) -> int:
@@ -331,9 +286,5 @@ def choreograph(
         raise QuaddanceError(f"fps must be > 0, got {fps}")
     n_frames = int(np.ceil(grid.duration_s * fps - 1e-9))
     t_s = np.arange(n_frames) / fps
-    styles = None
-    if moves is not None:
-        from quaddance.choreo.moves_file import paw_styles
-
-        styles = paw_styles(moves)
+    styles = None if moves is None else moves.paw_styles()
     return render_lifts(t_s, plan_dance(grid, seed=seed, style=style, styles=styles))

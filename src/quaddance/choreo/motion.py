@@ -17,7 +17,7 @@ Pickles are read with `safe_load_pickle`, never plain pickle. The floor is estim
 sequence as a low percentile of both ankles' heights, so a foot's height is its ankle's
 height above its standing height (the foot's bottom, up to the sole thickness).
 
-The trunk becomes ``HumanMotion.body`` (T, 4) = `quaddance.targets.BODY_COLUMNS` in human
+The trunk becomes ``HumanMotion.body`` (T, 4) = `quaddance.layout.BODY_COLUMNS` in human
 units (`body_from_joints`): the pelvis height and the trunk's roll, pitch and yaw, from the
 hips (left-right axis) and the spine (up axis), each minus its moving average over
 `DRIFT_WINDOW_S` (so walking off, turning round and a crouched stance are not danced).

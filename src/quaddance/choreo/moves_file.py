@@ -16,7 +16,7 @@ Format (every key optional except a move's ``gestures``)::
     bounce = 2.0
     run = 2.0                      # a paw move of quaddance.choreo.choreographer.MOVES
 
-Columns are `quaddance.targets.BODY_COLUMNS`; amplitudes are in robot units (m, rad) and
+Columns are `quaddance.layout.BODY_COLUMNS`; amplitudes are in robot units (m, rad) and
 must lie inside the robot's four-feet range (`BODY_LIMITS_FOUR_FEET`). Every error is one
 line naming the file and the problem.
 """
@@ -29,9 +29,10 @@ from pathlib import Path
 from typing import Any
 
 from quaddance.choreo.body import BODY_MOVES, BODY_STYLES, SHAPES, BodyMove, Gesture, MoveSet
-from quaddance.choreo.choreographer import MOVES, STYLES
+from quaddance.choreo.choreographer import MOVES
 from quaddance.errors import InputFileError
-from quaddance.targets import BODY_COLUMNS, BODY_LIMITS_FOUR_FEET
+from quaddance.layout import BODY_COLUMNS
+from quaddance.targets import BODY_LIMITS_FOUR_FEET
 
 MAX_MOVES_FILE_BYTES = 1 << 20
 MAX_MOVES = 200
@@ -161,17 +162,4 @@ def load_moves(path: str | Path) -> MoveSet:
     return MoveSet(body_moves=body_moves, styles=styles, source=path.name)
 
 
-def paw_styles(moves: MoveSet | None) -> dict[str, dict[str, float]]:
-    """The paw styles in use: the built-in ones and the paw part of the file's styles (a
-    file's style may also be a built-in name: it then replaces that style's paw weights
-    only where it names a paw move)."""
-    styles = dict(STYLES)
-    if moves is None:
-        return styles
-    paw_names = {m.name for m in MOVES}
-    for name, weights in moves.styles.items():
-        styles[name] = {k: v for k, v in weights.items() if k in paw_names} or styles.get(name, {})
-    return styles
-
-
-__all__ = ["BODY_STYLES", "load_moves", "paw_styles"]
+__all__ = ["BODY_STYLES", "load_moves"]

@@ -61,8 +61,16 @@ def choreograph_cmd(
     """Turn a song (or a human motion file) into robot foot-height and body targets, dance.npz."""
     from rich.console import Console
 
-    from quaddance.pipeline import ChoreographJob, clamp_table, dance_table, run_choreograph
-    from quaddance.targets import MODES
+    from quaddance.choreo.moves_file import load_moves
+    from quaddance.layout import MODES
+    from quaddance.pipeline import (
+        ChoreographJob,
+        DanceSpec,
+        clamp_table,
+        dance_table,
+        run_choreograph,
+    )
+    from quaddance.targets import TargetConfig
 
     if song is None and motion is None:
         raise typer.BadParameter("give a SONG, or --motion FILE (or both)")
@@ -72,13 +80,14 @@ def choreograph_cmd(
         song=song,
         motion=motion,
         out=out,
-        mode=mode,
-        h0_m=h0,
-        scale=scale,
-        max_height_m=max_height,
-        seed=seed,
-        style=style,
-        moves=moves,
+        spec=DanceSpec(
+            style=style,
+            seed=seed,
+            moves=None if moves is None else load_moves(moves),
+            targets=TargetConfig(mode=mode, h0_m=h0, scale=scale)
+            if max_height is None
+            else TargetConfig(mode=mode, h0_m=h0, scale=scale, max_height_m=max_height),
+        ),
         check=check,
     )
     with Console(stderr=True).status("Analysing the music and choreographing..."):

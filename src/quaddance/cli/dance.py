@@ -35,9 +35,12 @@ def dance_cmd(
     dance.npz and rollout.npz."""
     from rich.console import Console
 
+    from quaddance.choreo.moves_file import load_moves
+    from quaddance.layout import MODES
+    from quaddance.pipeline import DanceSpec
     from quaddance.play.dance import DanceJob, run_dance
     from quaddance.play.metrics import summary_table
-    from quaddance.targets import MODES
+    from quaddance.targets import TargetConfig
 
     if mode not in MODES:
         raise typer.BadParameter(f"--mode must be one of {', '.join(MODES)}, got {mode!r}")
@@ -57,12 +60,14 @@ def dance_cmd(
         song=song,
         motion=motion,
         policy=policy,
-        mode=mode,
-        seed=seed,
+        spec=DanceSpec(
+            style=style,
+            seed=seed,
+            moves=None if moves is None else load_moves(moves),
+            targets=TargetConfig(mode=mode),
+        ),
         video=not no_video,
         randomize=randomize,
-        style=style,
-        moves=moves,
         analysis_process=True,
     )
     progress, sim_progress = _progress_bar(console)

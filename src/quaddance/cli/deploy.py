@@ -49,12 +49,17 @@ def deploy_cmd(
     layer (damping on a fall, a stale or NaN state, Ctrl-C); writes deploy.json and log.npz."""
     from rich.console import Console
 
-    from quaddance.deploy.job import DeployJob, parse_inject, run_deploy, summary_line
+    from quaddance.deploy.job import (
+        BackendOptions,
+        DeployJob,
+        parse_inject,
+        run_deploy,
+        summary_line,
+    )
 
     console = Console(stderr=True)
     job = DeployJob(
         out_dir=out,
-        robot=robot,
         song=song,
         motion=motion,
         dance=dance,
@@ -63,9 +68,7 @@ def deploy_cmd(
         seconds=seconds,
         auto_start=auto_start,
         inject=parse_inject(inject),
-        robot_ip=robot_ip,
-        power_level=power_level,
-        sim_latency_ms=sim_latency_ms,
+        backend=BackendOptions(robot, robot_ip, power_level, sim_latency_ms),
     )
     summary, paths = run_deploy(job, status=lambda msg: console.log(msg))
     console.print(summary_line(summary))

@@ -67,28 +67,24 @@ def live_cmd(
     rollout.npz, deploy.json and log.npz (and dance.mp4 with --video)."""
     from rich.console import Console
 
-    from quaddance.choreo.choreographer import STYLES
+    from quaddance.deploy.job import BackendOptions
     from quaddance.live.session import LiveJob, run_live, summary_line
+    from quaddance.pipeline import DanceSpec
 
-    if style not in STYLES:
-        raise typer.BadParameter(f"--style must be one of {', '.join(sorted(STYLES))}")
     console = Console(stderr=True)
     job = LiveJob(
         out_dir=out,
         from_file=from_file,
         start_s=start,
         device=device,
-        robot=robot,
+        backend=BackendOptions(robot, robot_ip, power_level),
         policy=policy,
         seconds=seconds,
         viewer=viewer,
         host=host,
         port=port,
         video=video,
-        seed=seed,
-        style=style,
-        robot_ip=robot_ip,
-        power_level=power_level,
+        spec=DanceSpec(style=style, seed=seed),
     )
     summary, paths = run_live(job, status=lambda msg: console.log(msg))
     console.print(summary_line(summary))

@@ -13,6 +13,7 @@ import torch
 
 from quaddance.deploy.robot import Reading
 from quaddance.errors import QuaddanceError
+from quaddance.layout import BODY, PAWS
 from quaddance.play.policy import OnnxPolicy
 from quaddance.sim.body import BodyFeedforward
 from quaddance.sim.feedforward import FrontLiftFeedforward
@@ -97,11 +98,11 @@ class DanceController:
     def targets_at(self, ahead_steps: int) -> torch.Tensor:
         """(1, 4) paw targets ``ahead_steps`` ticks from the current step (held at the end;
         faded to `rest_row` after `fade_out`)."""
-        return self._row(ahead_steps)[:, :4]
+        return self._row(ahead_steps)[:, PAWS]
 
     def body_targets_at(self, ahead_steps: int) -> torch.Tensor:
         """(1, 4) body targets, as `targets_at`."""
-        return self._row(ahead_steps)[:, 4:]
+        return self._row(ahead_steps)[:, BODY]
 
     def fade_out(self, steps: int) -> None:
         """From the current step on, targets go linearly from their value now to `rest_row`

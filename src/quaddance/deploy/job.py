@@ -9,6 +9,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from quaddance.errors import InputFileError, QuaddanceError
+from quaddance.layout import FRONT_PAWS
+from quaddance.pipeline import DanceSpec, make_dance
 from quaddance.robots import RobotCfg
 
 ROBOTS: tuple[str, ...] = ("sim", "go1")
@@ -34,41 +36,57 @@ def parse_inject(values: list[str] | None) -> list[tuple[str, float]]:
     return out
 
 
+@dataclass(frozen=True)
+class BackendOptions:
+    """Which robot to run on, and how to reach it (`quaddance deploy` and `live`)."""
+
+    robot: str = "sim"  #: one of `ROBOTS`
+    robot_ip: str = "192.168.123.10"  #: go1: the robot's low-level IP
+    power_level: int = 1  #: go1: the SDK's PowerProtect level
+    sim_latency_ms: tuple[float, float] = (5.0, 20.0)  #: sim: sensor-to-motor delay range
+
+    def check(self) -> None:
+        """Refuse options that name no robot or an impossible delay range."""
+        if self.robot not in ROBOTS:
+            raise QuaddanceError(f"--robot must be one of {', '.join(ROBOTS)}, got {self.robot!r}")
+        lo, hi = self.sim_latency_ms
+        if not 0 <= lo <= hi:
+            raise QuaddanceError(f"--sim-latency-ms needs 0 <= LO <= HI, got {lo:g} {hi:g}")
+
+
+def make_robot(backend: BackendOptions, robot: RobotCfg):
+    """The robot of ``backend`` for the policy's ``robot``: simulated in another process (the
+    simulator simulates that robot), or a real Go1."""
+    backend.check()
+    if backend.robot == "sim":
+        from quaddance.deploy.sim_backend import SimRobot, SimRobotCfg
+
+        latency_ms = tuple(backend.sim_latency_ms)
+        return SimRobot(SimRobotCfg(latency_ms=latency_ms, robot=robot.name))
+    from quaddance.deploy.go1_backend import Go1Robot, load_sdk
+
+    if robot != Go1Robot.robot_cfg:
+        raise QuaddanceError(f"--robot go1 drives a Go1, but the policy is for {robot.name}")
+    load_sdk()  # the missing-SDK error before anything else happens
+    return Go1Robot(backend.robot_ip, backend.power_level)
+
+
 @dataclass
 class DeployJob:
     """What `quaddance deploy` was asked to do."""
 
     out_dir: Path
-    robot: str = "sim"
     song: Path | None = None
     motion: Path | None = None
     dance: Path | None = None  #: a ready dance.npz
     demo: bool = False
+    #: which dance to make of the song or motion; its paw targets: the policy's range
+    spec: DanceSpec = field(default_factory=DanceSpec)
     policy: Path | None = None
     seconds: float | None = None
     auto_start: bool = False
     inject: list[tuple[str, float]] = field(default_factory=list)
-    mode: str = "feasible"
-    seed: int = 0
-    robot_ip: str = "192.168.123.10"
-    power_level: int = 1
-    sim_latency_ms: tuple[float, float] = (5.0, 20.0)
-
-
-def make_robot(job: DeployJob, robot: RobotCfg):
-    """The backend ``job.robot`` for the policy's ``robot`` (the simulator simulates it)."""
-    if job.robot == "sim":
-        from quaddance.deploy.sim_backend import SimRobot, SimRobotCfg
-
-        return SimRobot(SimRobotCfg(latency_ms=tuple(job.sim_latency_ms), robot=robot.name))
-    if job.robot == "go1":
-        from quaddance.deploy.go1_backend import Go1Robot, load_sdk
-
-        if robot != Go1Robot.robot_cfg:
-            raise QuaddanceError(f"--robot go1 drives a Go1, but the policy is for {robot.name}")
-        load_sdk()  # the missing-SDK error before anything else happens
-        return Go1Robot(job.robot_ip, job.power_level)
-    raise QuaddanceError(f"--robot must be one of {', '.join(ROBOTS)}, got {job.robot!r}")
+    backend: BackendOptions = field(default_factory=BackendOptions)
 
 
 def run_deploy(job: DeployJob, status: Callable[[str], None] = lambda m: None) -> tuple[dict, dict]:
@@ -77,18 +95,19 @@ def run_deploy(job: DeployJob, status: Callable[[str], None] = lambda m: None) -
     from quaddance.deploy.log import write_outputs
     from quaddance.deploy.runner import DeployOptions, Runner
     from quaddance.fileio import check_output_file, ensure_dir
-    from quaddance.play.dance import target_config_for
+    from quaddance.play.dance import spec_for_policy
     from quaddance.play.policy import OnnxPolicy, shipped_policy_path
 
     n_sources = (job.song is not None) + job.demo + (job.dance is not None)
     if n_sources > 1 or (job.dance and job.motion) or (n_sources == 0 and job.motion is None):
         raise QuaddanceError("give one of SONG, --demo, --dance FILE or --motion FILE")
-    if job.robot not in ROBOTS:
-        raise QuaddanceError(f"--robot must be one of {', '.join(ROBOTS)}, got {job.robot!r}")
-    lo, hi = job.sim_latency_ms
-    if not 0 <= lo <= hi:
-        raise QuaddanceError(f"--sim-latency-ms needs 0 <= LO <= HI, got {lo:g} {hi:g}")
-    if job.inject and job.robot != "sim":
+    if job.dance is not None and job.spec != DanceSpec():
+        raise QuaddanceError(
+            "--dance FILE is a dance already: --mode, --style, --moves and "
+            "--seed choose the dance of a SONG, --demo or --motion"
+        )
+    job.backend.check()
+    if job.inject and job.backend.robot != "sim":
         raise QuaddanceError("--inject works with --robot sim only (never on a real robot)")
     if job.seconds is not None and not (math.isfinite(job.seconds) and job.seconds > 0):
         raise QuaddanceError(f"--seconds must be > 0, got {job.seconds}")
@@ -110,32 +129,25 @@ def run_deploy(job: DeployJob, status: Callable[[str], None] = lambda m: None) -
         if job.dance is not None:
             dance = load_dance(job.dance)
         else:
-            from quaddance.pipeline import make_dance
-
             status("analysing the music and choreographing")
-            dance, _ = make_dance(
-                song,
-                job.motion,
-                mode=job.mode,
-                seed=job.seed,
-                target_cfg=target_config_for(policy, job.mode),
-            )
+            dance, _ = make_dance(song, job.motion, spec_for_policy(job.spec, policy))
         if abs(dance.fps - policy.task.policy_hz) > 1e-6:
             raise InputFileError(
                 job.dance or song or job.motion,
                 f"dance is at {dance.fps:g} Hz but the policy runs at {policy.task.policy_hz:g} Hz",
             )
         max_h = (policy.meta.get("targets") or {}).get("max_height_m")
-        if max_h is not None and float(dance.targets_m[:, :2].max()) > max_h + 1e-6:
+        highest_m = float(dance.targets_m[:, FRONT_PAWS].max())
+        if max_h is not None and highest_m > max_h + 1e-6:
             status(
-                f"warning: targets up to {dance.targets_m[:, :2].max():.2f} m; the policy was "
+                f"warning: targets up to {highest_m:.2f} m; the policy was "
                 f"trained up to {max_h:.2f} m (quaddance choreograph --mode feasible)"
             )
         options = DeployOptions(
             seconds=job.seconds, auto_start=job.auto_start, inject=job.inject, song=song
         )
         runner = Runner(
-            make_robot(job, policy.task.scene.robot),
+            make_robot(job.backend, policy.task.scene.robot),
             policy,
             dance.targets_m,
             options,

@@ -1,11 +1,10 @@
 """On-the-fly choreography: the dance is planned a bar ahead on the beat grid that the online
 tracker predicts, and streamed as robot targets (paws and trunk) at the policy rate.
 
-The offline choreographer does the choosing (`choreo.choreographer.choreograph`,
-`choreo.body.choreograph_body`) on a small `MusicGrid` of the predicted beats of the next
-segment (one to two bars, ending on a downbeat), and the offline target rules make it
-feasible (`targets.robot_targets`, `targets.feasible_body_targets`), so a live dance is made
-of the same moves as a planned one. Segments overlap by `TAIL_BEATS`: a lift or gesture on
+The dance composer (`pipeline.compose`, the one that makes every dance) plans each segment
+on a small `MusicGrid` of the predicted beats of the next segment (one to two bars, ending on
+a downbeat), so a live dance is made of the same moves and the same feasible targets as a
+planned one. Segments overlap by `TAIL_BEATS`: a lift or gesture on
 the last beat finishes in the next segment's time (paws: the higher target; trunk:
 cross-faded). Without a stable lock the robot holds a calm standing pose.
 
@@ -21,22 +20,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from quaddance.choreo.body import choreograph_body, plan_body
-from quaddance.choreo.choreographer import choreograph, min_jerk
+from quaddance.choreo.body import plan_body
 from quaddance.choreo.grid import MusicGrid
-from quaddance.targets import (
-    TargetConfig,
-    continue_body_targets,
-    feasible_body_targets,
-    robot_targets,
-)
+from quaddance.layout import BEATS_PER_BAR, BODY, FRONT_PAWS, N_BODY, PAWS, row_width
+from quaddance.lifts import min_jerk
+from quaddance.pipeline import DanceSpec, compose
+from quaddance.targets import continue_body_targets
 
 #: While dancing, committed targets reach at least this far (and a bar more) past the song's
 #: "now", s: the policy's preview (0.4 s) plus the audio-to-command latency (45 ms), with
 #: 0.25 s for planning a bar (at most 14 ms measured).
 LOOKAHEAD_S = 0.7
-#: Rate at which the human dance is rendered before it becomes robot targets (CHOREO_FPS).
-HUMAN_FPS = 60.0
 #: Beats each segment runs past its end, for lifts and gestures that land on its last beat.
 TAIL_BEATS = 1.0
 #: Loudness history the choreographer reads, s: "loud" means loud for this song so far.
@@ -49,7 +43,6 @@ ENERGY_FPS = 10.0
 CALM_LOOKAHEAD_S = 0.5
 #: Length of a calm chunk, s: short, so that a plan starts soon after a lock.
 CALM_CHUNK_S = 0.04
-BEATS_PER_BAR = 4
 
 
 @dataclass
@@ -63,21 +56,18 @@ class Segment:
 
 
 class LiveChoreographer:
-    """Turns tracker states into a growing (T, 8) array of targets from song time 0 at
-    ``policy_hz``: paw targets (FL, FR, RL, RR, m) then body targets (`BODY_COLUMNS`)."""
+    """Turns tracker states into a growing (T, 8) array of target rows (`quaddance.layout`:
+    paws, then trunk) from song time 0 at ``policy_hz``. Segment k is the dance of ``spec``
+    with seed ``spec.seed + k``."""
 
-    def __init__(
-        self,
-        policy_hz: float,
-        target_cfg: TargetConfig | None = None,
-        seed: int = 0,
-        style: str = "mixed",
-    ) -> None:
+    def __init__(self, policy_hz: float, spec: DanceSpec | None = None) -> None:
         self.hz = float(policy_hz)
-        self.cfg = dataclasses.replace(target_cfg or TargetConfig(), out_fps=self.hz)
-        self.seed = int(seed)
-        self.style = style
-        self.rows = np.zeros((0, 8))
+        spec = spec or DanceSpec()
+        self.spec = dataclasses.replace(
+            spec, targets=dataclasses.replace(spec.targets, out_fps=self.hz)
+        )
+        self.cfg = self.spec.targets
+        self.rows = np.zeros((0, row_width(body=True)))
         self.planned_until_step = 0  # rows before this are final
         self.segments: list[Segment] = []
         self._energy: list[tuple[float, float]] = []  # (song s, 0..1)
@@ -116,7 +106,7 @@ class LiveChoreographer:
     def _calm(self, chunk_s: float) -> None:
         start = self.planned_until_step
         n = max(1, round(chunk_s * self.hz))
-        self._write(start, np.zeros((n, 8)))
+        self._write(start, np.zeros((n, row_width(body=True))))
         self.planned_until_step = start + n
         if not self.segments or self.segments[-1].move != "calm":
             self.segments.append(Segment(start / self.hz, (start + n) / self.hz, 0.0, "calm"))
@@ -162,13 +152,10 @@ class LiveChoreographer:
             energy_fps=ENERGY_FPS,
             sections_s=np.zeros(0),
         )
-        seed = self.seed + len(self.segments)
-        feet = choreograph(grid, seed=seed, fps=HUMAN_FPS, style=self.style)
-        _, paws = robot_targets(feet, HUMAN_FPS, grid.beats_s, self.cfg)
-        body_human = choreograph_body(grid, feet, HUMAN_FPS, seed=seed, style=self.style)
-        t_out = np.arange(paws.shape[0]) / self.hz
-        body, _ = feasible_body_targets(body_human, HUMAN_FPS, t_out, paws)
-        rows = np.concatenate([paws, body], axis=1)[start_step - origin_step :]
+        spec = dataclasses.replace(self.spec, seed=self.spec.seed + len(self.segments))
+        dance = compose(spec, grid)
+        rows = np.concatenate([dance.targets_m, dance.body_targets], axis=1)
+        rows = rows[start_step - origin_step :]
         _drop_cut_lifts(rows)
         # The trunk hands over from the old plan by the segment's first beat, so that
         # beat's gesture is the new plan's own (a fade past it halved a downbeat's accent).
@@ -177,7 +164,7 @@ class LiveChoreographer:
         # lift rises, in the overlap that the next plan blends.
         commit_s = max(start_s + 1.0 / self.hz, end_s - period)
         self.planned_until_step = min(round(commit_s * self.hz), self.rows.shape[0])
-        plan = plan_body(grid, seed=seed, style=self.style)
+        plan = plan_body(grid, seed=spec.seed, style=spec.style, moves=spec.moves)
         move = plan[0][1].name if plan else "hold"
         self.segments.append(Segment(start_s, commit_s, 60.0 / period, move))
 
@@ -199,20 +186,21 @@ class LiveChoreographer:
         have = self.rows.shape[0]
         new = new.copy()
         n_tail = max(0, min(have - start, new.shape[0]))
-        new[:n_tail, :4] = np.maximum(self.rows[start : start + n_tail, :4], new[:n_tail, :4])
+        old_paws = self.rows[start : start + n_tail, PAWS]
+        new[:n_tail, PAWS] = np.maximum(old_paws, new[:n_tail, PAWS])
         n_fade = min(new.shape[0], fade_steps)
         if n_fade > 0:
-            last = self.rows[start - 1, 4:] if start > 0 else np.zeros(4)
+            last = self.rows[start - 1, BODY] if start > 0 else np.zeros(N_BODY)
             old = np.tile(last, (n_fade, 1))
             n_old = min(n_tail, n_fade)
-            old[:n_old] = self.rows[start : start + n_old, 4:]
+            old[:n_old] = self.rows[start : start + n_old, BODY]
             w = min_jerk(np.arange(1, n_fade + 1) / (n_fade + 1))[:, None]
-            new[:n_fade, 4:] = (1 - w) * old + w * new[:n_fade, 4:]
+            new[:n_fade, BODY] = (1 - w) * old + w * new[:n_fade, BODY]
         if start >= 2:
             # The trunk keeps the offline targets' speed and acceleration bounds across the
             # seam, and when a lost lock sends it back to the calm pose.
-            sent = self.rows[start - 2 : start, 4:]
-            new[:, 4:] = continue_body_targets(new[:, 4:], sent, 1.0 / self.hz)
+            sent = self.rows[start - 2 : start, BODY]
+            new[:, BODY] = continue_body_targets(new[:, BODY], sent, 1.0 / self.hz)
         self.rows = np.concatenate([self.rows[:start], new], axis=0)
         _one_paw_at_a_time(self.rows, start, round(self.cfg.min_ground_s * self.hz))
 
@@ -249,11 +237,11 @@ def _one_paw_at_a_time(
     (they obey the rule among themselves, so the later lift always starts after them)."""
     first = max(0, first_free - 1)  # a lift under way at the seam is seen from its row before
     lookback = first
-    while lookback > 0 and np.any(rows[lookback - 1, :2] > eps_m):
+    while lookback > 0 and np.any(rows[lookback - 1, FRONT_PAWS] > eps_m):
         lookback -= 1  # from the start of any lift still under way at the seam
     base = max(0, lookback - min_ground_steps)
     busy_until = -(10**9)  # last row of the lifts kept so far
-    for a, b, k in _lift_runs(rows[base:, :2], eps_m):
+    for a, b, k in _lift_runs(rows[base:, FRONT_PAWS], eps_m):
         a, b = a + base, b + base
         if a - busy_until <= min_ground_steps and a >= first_free:
             rows[a:b, k] = 0.0

@@ -23,7 +23,10 @@ from typing import Any
 import numpy as np
 
 from quaddance.children import ignore_sigint, sigint_blocked_for_children
+from quaddance.deploy.job import BackendOptions
 from quaddance.errors import QuaddanceError
+from quaddance.layout import BODY, N_BODY, N_PAWS, PAWS, row_width
+from quaddance.pipeline import DanceSpec
 
 #: Dance length for a microphone without --seconds, s.
 MIC_DEFAULT_S = 60.0
@@ -41,18 +44,15 @@ class LiveJob:
     from_file: Path | None = None  #: a song fed at real-time pace; None: the microphone
     start_s: float = 0.0  #: with from_file: play from this far into it (music already playing)
     device: str | None = None  #: microphone (sounddevice name or index); None: default
-    robot: str = "sim"
+    backend: BackendOptions = field(default_factory=BackendOptions)
     policy: Path | None = None
     seconds: float | None = None  #: dance at most this long
     viewer: bool = False
     host: str = "127.0.0.1"
     port: int = 8080
     video: bool = False  #: with --from-file: dance.mp4 afterwards
-    seed: int = 0
-    style: str = "mixed"
-    sim_latency_ms: tuple[float, float] = (5.0, 20.0)
-    robot_ip: str = "192.168.123.10"  #: --robot go1
-    power_level: int = 1  #: --robot go1
+    #: which dance, bar by bar (segment k: seed + k); its paw targets: the policy's range
+    spec: DanceSpec = field(default_factory=DanceSpec)
 
 
 @dataclass
@@ -80,7 +80,6 @@ def _listen(spec: dict, out: Any, go: Any, stop: Any) -> None:
         from quaddance.live.choreographer import LiveChoreographer
         from quaddance.music.live import FileSource, MicSource
         from quaddance.music.online_beats import OnlineBeatTracker
-        from quaddance.targets import TargetConfig
 
         if spec["from_file"] is not None:
             source: Any = FileSource(spec["from_file"], realtime=True, start_s=spec["start_s"])
@@ -92,9 +91,7 @@ def _listen(spec: dict, out: Any, go: Any, stop: Any) -> None:
         # part-way, may join music already playing.
         song_start = spec["from_file"] is not None and spec["start_s"] == 0
         tracker = OnlineBeatTracker(song_start=song_start)
-        choreo = LiveChoreographer(
-            spec["policy_hz"], TargetConfig(**spec["target_cfg"]), spec["seed"], spec["style"]
-        )
+        choreo = LiveChoreographer(spec["policy_hz"], spec["dance"])
     except QuaddanceError as err:
         out.put(("error", str(err)))
         return
@@ -114,7 +111,7 @@ def _listen(spec: dict, out: Any, go: Any, stop: Any) -> None:
             update = _Update(
                 arrival_s=arrival,
                 t_end_s=block.t_end_s,
-                rows=np.zeros((0, 8)),
+                rows=np.zeros((0, row_width(body=True))),
                 beats=[(e.time_s, e.downbeat, e.tempo_bpm) for e in events],
                 tempo_bpm=float(state.tempo_bpm),
                 locked=bool(state.locked),
@@ -174,7 +171,7 @@ class _LiveFeed:
                 self.ended = True
                 continue
             if msg.rows.shape[0]:
-                self.ctrl.extend(msg.rows[:, :4], msg.rows[:, 4:])
+                self.ctrl.extend(msg.rows[:, PAWS], msg.rows[:, BODY])
             for t_s, down, _bpm in msg.beats:
                 self.beats_s.append(t_s)
                 if down:
@@ -208,11 +205,11 @@ class _LiveFeed:
 
 def run_live(job: LiveJob, status=lambda msg: None) -> tuple[dict, dict[str, Path]]:
     """Run `quaddance live`; returns (live.json contents, output paths)."""
-    from quaddance.deploy.job import DeployJob, make_robot
+    from quaddance.deploy.job import make_robot
     from quaddance.deploy.log import percentiles, rollout_from_log, write_outputs
     from quaddance.deploy.runner import DeployOptions, Runner
     from quaddance.fileio import check_output_file, ensure_dir, write_json
-    from quaddance.play.dance import target_config_for
+    from quaddance.play.dance import spec_for_policy
     from quaddance.play.metrics import whole_body_metrics
     from quaddance.play.policy import OnnxPolicy, shipped_policy_path
     from quaddance.play.rollout import save_rollout
@@ -227,6 +224,7 @@ def run_live(job: LiveJob, status=lambda msg: None) -> tuple[dict, dict[str, Pat
         raise QuaddanceError("--start needs --from-file (a microphone hears what plays now)")
     if job.seconds is not None and not (np.isfinite(job.seconds) and job.seconds > 0):
         raise QuaddanceError(f"--seconds must be > 0, got {job.seconds}")
+    job.backend.check()
     policy = OnnxPolicy.load(job.policy or shipped_policy_path())
     out = ensure_dir(job.out_dir)
     names = ["live.json", "deploy.json", "log.npz", "rollout.npz"] + ["dance.mp4"] * job.video
@@ -235,15 +233,12 @@ def run_live(job: LiveJob, status=lambda msg: None) -> tuple[dict, dict[str, Pat
 
     ctx = mp.get_context("spawn")
     updates, go, stop = ctx.Queue(), ctx.Event(), ctx.Event()
-    cfg = target_config_for(policy, "feasible")
     spec = {
         "from_file": None if job.from_file is None else str(job.from_file),
         "start_s": job.start_s,
         "device": job.device,
         "policy_hz": policy.task.policy_hz,
-        "target_cfg": {f: getattr(cfg, f) for f in cfg.__dataclass_fields__},
-        "seed": job.seed,
-        "style": job.style,
+        "dance": spec_for_policy(job.spec, policy),
     }
     status("opening the audio input and loading the beat tracker")
     listener = ctx.Process(target=_listen, args=(spec, updates, go, stop), daemon=True)
@@ -269,23 +264,13 @@ def run_live(job: LiveJob, status=lambda msg: None) -> tuple[dict, dict[str, Pat
         options = DeployOptions(
             seconds=duration_s, auto_start=True, song=job.from_file, song_start_s=job.start_s
         )
-        robot = make_robot(
-            DeployJob(
-                out_dir=out,
-                robot=job.robot,
-                sim_latency_ms=job.sim_latency_ms,
-                robot_ip=job.robot_ip,
-                power_level=job.power_level,
-            ),
-            policy.task.scene.robot,
-        )
         runner = Runner(
-            robot,
+            make_robot(job.backend, policy.task.scene.robot),
             policy,
-            np.zeros((1, 4)),
+            np.zeros((1, N_PAWS)),
             options,
             status=status,
-            body_targets=np.zeros((1, 4)),
+            body_targets=np.zeros((1, N_BODY)),
             feeder=_starter(feed, go),
             on_tick=feed.on_tick,
             dance_s=duration_s,
@@ -310,7 +295,7 @@ def run_live(job: LiveJob, status=lambda msg: None) -> tuple[dict, dict[str, Pat
         "source": str(job.from_file) if job.from_file is not None else "microphone",
         # Song time 0 is this far into the file (times below are from where it started).
         "start_s": job.start_s,
-        "robot": job.robot,
+        "robot": job.backend.robot,
         "policy": str(policy.onnx_path),
         "duration_s": result.summary.get("duration_s"),
         "lock_s": None if not np.isfinite(feed.lock_s) else round(feed.lock_s, 3),

@@ -37,8 +37,7 @@ from typing import Any
 import numpy as np
 
 from quaddance.errors import InputFileError
-
-BEATS_PER_BAR = 4  # 4/4 is assumed: nearly all dance music is in four
+from quaddance.layout import BEATS_PER_BAR
 
 
 @dataclass(frozen=True)

@@ -92,6 +92,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from quaddance.layout import BEATS_PER_BAR
 from quaddance.music.analysis import (
     SWING_FRACTIONS,
     AnalysisConfig,
@@ -309,7 +310,6 @@ guesses into silence that a robot should not dance to (the breaks of the live an
 sets: F +0.01 to +0.03 on each of their 6 songs with breaks). A whole period, not less: sparse
 music (clicks, staccato notes) is digitally silent between its beats."""
 
-BEATS_PER_BAR = 4
 BAR_EVIDENCE_DECAY = 0.95
 """Per-beat decay of the downbeat evidence (a memory of about 5 bars)."""
 BAR_SWITCH_RATIO = 1.25

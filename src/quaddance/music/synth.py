@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from quaddance.layout import BEATS_PER_BAR
+
 DEMO_TEMPO_BPM = 118.0
 """Tempo of the built-in demo song: the middle of the dance range (AIST++ 80-130 BPM)."""
 
@@ -29,8 +31,6 @@ DEMO_DURATION_S = 30.0
 """Length of the built-in demo song: the length of one EDGE output clip (30 s, FACTS.md §3)."""
 
 DEMO_SEED = 7
-
-BEATS_PER_BAR = 4
 
 # A minor, I-V-vi-IV in C major order starting on Am: (root MIDI note, chord MIDI notes).
 _PROGRESSIONS: tuple[tuple[tuple[int, tuple[int, ...]], ...], ...] = (

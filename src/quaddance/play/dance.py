@@ -6,6 +6,7 @@ cpu engine -> dance.mp4 (with the song), feet.png (the paper's Fig. 4), metrics.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -15,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 from quaddance.dancefile import Dance, save_dance
 from quaddance.errors import InputFileError
 from quaddance.fileio import check_output_file, ensure_dir, write_json
+from quaddance.pipeline import DanceSpec, make_dance
 
 if TYPE_CHECKING:
     from quaddance.play.policy import OnnxPolicy
@@ -30,18 +32,16 @@ class DanceJob:
     song: Path | None = None
     motion: Path | None = None
     policy: Path | None = None  # None: the shipped policy
-    mode: str = "feasible"
-    seed: int = 0
+    # Which dance; its paw targets are put in the policy's range (`spec_for_policy`).
+    spec: DanceSpec = field(default_factory=DanceSpec)
     video: bool = True
     randomize: bool = False
-    sim_seed: int | None = None  # seed of the randomised dynamics; None: `seed`
+    sim_seed: int | None = None  # seed of the randomised dynamics; None: the dance's seed
     policy_output: str = "policy"  # "zero": the front-lift feed-forward alone (baseline)
     pinned: PinnedDynamics | None = None  # fixed dynamics and pushes (robustness envelope)
     width: int = 640
     height: int = 480
     target_markers: bool = True
-    style: str = "mixed"  # choreography style
-    moves: Path | None = None  # a --moves TOML file of extra body moves and styles
     # Analyse the song (then choreograph, and compute the beat metrics) in a second process
     # while this one loads torch and the policy: for a one-off command (`quaddance dance`) in
     # a fresh process, where the imports are start-up cost; not for loops over many songs
@@ -57,12 +57,19 @@ class DanceOutputs:
     timings_s: dict[str, float] = field(default_factory=dict)
 
 
+def spec_for_policy(spec: DanceSpec, policy: OnnxPolicy) -> DanceSpec:
+    """``spec`` with its paw targets in the range the policy was trained on (its JSON)."""
+    max_h = policy.meta.get("targets", {}).get("max_height_m")
+    if max_h is None:
+        return spec
+    return dataclasses.replace(spec, targets=dataclasses.replace(spec.targets, max_height_m=max_h))
+
+
 def target_config_for(policy: OnnxPolicy, mode: str):
     """Targets in the range the policy was trained on (its JSON), in the requested mode."""
     from quaddance.targets import TargetConfig
 
-    max_h = policy.meta.get("targets", {}).get("max_height_m")
-    return TargetConfig(mode=mode) if max_h is None else TargetConfig(mode=mode, max_height_m=max_h)
+    return spec_for_policy(DanceSpec(targets=TargetConfig(mode=mode)), policy).targets
 
 
 def run_dance(
@@ -153,12 +160,8 @@ class _Helper:
 def _load_choreography() -> None:
     import scipy.signal  # noqa: F401 - what the targets' lift detection uses
 
-    import quaddance.pipeline  # noqa: F401
-
 
 def _make_dance(**kwargs: Any) -> Dance:
-    from quaddance.pipeline import make_dance
-
     return make_dance(**kwargs)[0]
 
 
@@ -178,11 +181,6 @@ def _run_dance(
     for path in (job.song, job.motion):
         if path is not None and not Path(path).is_file():
             raise InputFileError(path, "no such file")
-    move_set = None
-    if job.moves is not None:
-        from quaddance.choreo.moves_file import load_moves
-
-        move_set = load_moves(job.moves)  # a bad file fails before any work
     policy_path = job.policy or shipped_policy_path()
     policy = OnnxPolicy.load(policy_path)
     out = ensure_dir(job.out_dir)
@@ -201,21 +199,11 @@ def _run_dance(
             from quaddance.play.plots import preload
 
             preload()
-    how = dict(
-        song=job.song,
-        motion=job.motion,
-        mode=job.mode,
-        seed=job.seed,
-        target_cfg=target_config_for(policy, job.mode),
-        style=job.style,
-        moves=move_set,
-    )
+    how = dict(song=job.song, motion=job.motion, spec=spec_for_policy(job.spec, policy))
     dance = None
     if pending is not None and (analysis := pending.analysis()) is not None:
         dance = pending.run(_make_dance, analysis=analysis, **how)
     if dance is None:
-        from quaddance.pipeline import make_dance
-
         dance, _ = make_dance(**how)
     timings["choreography_s"] = time.perf_counter() - t0
     # torch only now: imported before librosa it makes librosa's import slower (lazy_loader
@@ -244,7 +232,7 @@ def _run_dance(
 
     else:
         status("dancing (simulation)")
-    sim_seed = job.seed if job.sim_seed is None else job.sim_seed
+    sim_seed = job.spec.seed if job.sim_seed is None else job.sim_seed
     result = rollout(
         dance,
         policy,

@@ -88,7 +88,9 @@ def evaluate_items(
     metrics.json."""
     import tempfile
 
+    from quaddance.pipeline import DanceSpec
     from quaddance.play.dance import DanceJob, run_dance
+    from quaddance.targets import TargetConfig
 
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -101,8 +103,7 @@ def evaluate_items(
                 song=None if is_motion else item,
                 motion=item if is_motion else None,
                 policy=policy,
-                mode=settings.mode,
-                seed=settings.seed,
+                spec=DanceSpec(seed=settings.seed, targets=TargetConfig(mode=settings.mode)),
                 video=False,
                 randomize=settings.randomize,
                 # One draw of the dynamics per item, not the same robot for every item.

@@ -217,7 +217,7 @@ def tracking_metrics(
     return out
 
 
-#: Body-target columns (`quaddance.targets.BODY_COLUMNS`) and their report units.
+#: Body-target columns (`quaddance.layout.BODY_COLUMNS`) and their report units.
 BODY_METRIC_COLUMNS: tuple[tuple[str, str], ...] = (
     ("height", "m"),
     ("roll", "deg"),

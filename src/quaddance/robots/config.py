@@ -16,7 +16,7 @@ class BodyLimits:
     """The trunk pose range a robot holds while dancing, relative to standing.
 
     ``height_offset_m`` is (lowest, highest), m; the angles are symmetric maxima, rad.
-    ``max_speed`` and ``max_accel`` are per column of `quaddance.targets.BODY_COLUMNS`
+    ``max_speed`` and ``max_accel`` are per column of `quaddance.layout.BODY_COLUMNS`
     (m/s or rad/s, and m/s^2 or rad/s^2).
     """
 

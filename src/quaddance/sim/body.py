@@ -1,7 +1,7 @@
 """Trunk poses for whole-body dance: leg inverse kinematics and the body feed-forward.
 
 A body target is (height offset m, roll, pitch, yaw rad) of the trunk relative to the
-standing pose, feet staying where they stand (`quaddance.targets.BODY_COLUMNS`). The
+standing pose, feet staying where they stand (`quaddance.layout.BODY_COLUMNS`). The
 feed-forward moves every leg so that its foot stays put in the world while the trunk takes
 the pose: the same idea as the front-lift feed-forward (`sim/feedforward.py`), so PPO learns
 corrections and balance instead of the whole motion. Batched torch, used by training, playback
@@ -14,8 +14,6 @@ import torch
 
 from quaddance.robots import RobotCfg
 from quaddance.sim.kinematics import LegGeometry, foot_pos_b, leg_geometry
-
-BODY_DIM = 4  # height offset, roll, pitch, yaw
 
 
 def rpy_matrix(rpy: torch.Tensor) -> torch.Tensor:

@@ -101,7 +101,7 @@ class DanceTaskCfg:
     # (quaddance.sim.feedforward); the policy corrects and balances.
     front_feedforward: bool = True
     # Ours, beyond the paper: the trunk dances too. The dance's body targets (height offset,
-    # roll, pitch, yaw; `quaddance.targets.BODY_COLUMNS`) enter the actor's observation, the
+    # roll, pitch, yaw; `quaddance.layout.BODY_COLUMNS`) enter the actor's observation, the
     # rewards track them, and a body feed-forward (quaddance.sim.body) moves all four legs
     # to hold the feet still while the trunk takes the pose.
     whole_body: bool = False

@@ -21,6 +21,7 @@ from typing import Any
 
 import torch
 
+from quaddance.layout import FRONT_PAWS
 from quaddance.sim.config import DanceTaskCfg, DomainRandCfg, ObsSlice
 from quaddance.sim.kinematics import estimate_foot_height_m, leg_geometry
 from quaddance.sim.state import RobotState, quat_rotate_inverse, wrap_angle_rad, yaw_from_quat
@@ -110,8 +111,6 @@ def _heading_error(ob: ActorObservation) -> torch.Tensor:
     return wrap_angle_rad(ob.meas.heading_rad - ob.body_targets_at(0)[:, 3])[:, None]
 
 
-_FRONT = slice(0, 2)  # a paw-target row's front paws
-
 #: One frame of what the robot measures, in order (the history stacks whole frames).
 PROPRIO_TERMS: tuple[ObsTerm, ...] = (
     ObsTerm("projected_gravity", lambda ob: ob.meas.projected_gravity_b, "imu"),
@@ -133,10 +132,10 @@ PROPRIO_TERMS: tuple[ObsTerm, ...] = (
 
 #: The dance's targets, after the history: the front paws' targets now and ahead.
 PAW_TARGET_TERMS: tuple[ObsTerm, ...] = (
-    ObsTerm("front_targets_now_m", lambda ob: ob.targets_at(0)[:, _FRONT], "dance"),
+    ObsTerm("front_targets_now_m", lambda ob: ob.targets_at(0)[:, FRONT_PAWS], "dance"),
     ObsTerm(
         "front_targets_preview_m",
-        lambda ob: _preview(ob.targets_at, ob.preview_steps, _FRONT),
+        lambda ob: _preview(ob.targets_at, ob.preview_steps, FRONT_PAWS),
         "dance",
     ),
 )

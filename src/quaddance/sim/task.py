@@ -12,8 +12,9 @@ from typing import Protocol
 import numpy as np
 import torch
 
+from quaddance.layout import BODY, FRONT_PAWS, N_BODY, PAWS, row_width
 from quaddance.sim import observations, rewards, terminations
-from quaddance.sim.body import BODY_DIM, BodyFeedforward
+from quaddance.sim.body import BodyFeedforward
 from quaddance.sim.config import DanceTaskCfg, ObsSlice
 from quaddance.sim.engine import Engine, nominal_dynamics
 from quaddance.sim.engines import make_engine
@@ -61,7 +62,7 @@ def joint_targets(actions: torch.Tensor, src: JointTargetSource) -> torch.Tensor
     call this."""
     target = src.nominal_joint_pos + src.action_scale * actions
     if src.feedforward is not None:
-        target = target + src.feedforward(src.targets_at(1)[:, :2])
+        target = target + src.feedforward(src.targets_at(1)[:, FRONT_PAWS])
     if src.body_feedforward is not None:
         target = target + src.body_feedforward(src.body_targets_at(1))
     return target
@@ -69,7 +70,7 @@ def joint_targets(actions: torch.Tensor, src: JointTargetSource) -> torch.Tensor
 
 class DanceEnv:
     """Vectorised dance task. `bank` (B, L, 4) holds paw-target sequences at the policy rate,
-    or (B, L, 8) paw then body targets (`quaddance.targets.BODY_COLUMNS`) for whole-body dance.
+    or (B, L, 8) paw then body targets (`quaddance.layout.BODY_COLUMNS`) for whole-body dance.
 
     Implements rsl-rl's `VecEnv` interface by duck typing: importing it (with tensordict,
     which imports torch._dynamo) would cost playback 2 s. With `compute_rewards=False`
@@ -106,12 +107,12 @@ class DanceEnv:
         self._variants = torch.as_tensor(self.engine.variants, dtype=torch.float32, device=dev)
 
         bank_t = torch.as_tensor(np.asarray(bank), dtype=torch.float32)
-        if bank_t.ndim != 3 or bank_t.shape[2] not in (4, 4 + BODY_DIM):
+        if bank_t.ndim != 3 or bank_t.shape[2] not in (row_width(False), row_width(True)):
             raise ValueError(
                 f"target bank must be (B, L, 4) or (B, L, 8), got {tuple(bank_t.shape)}"
             )
         if bank_t.shape[2] == 4:  # no body targets: the trunk stands still
-            bank_t = torch.cat([bank_t, torch.zeros(*bank_t.shape[:2], BODY_DIM)], dim=2)
+            bank_t = torch.cat([bank_t, torch.zeros(*bank_t.shape[:2], N_BODY)], dim=2)
         self.bank = bank_t.to(dev)
         self.random_start = random_start
         # Training's curriculum (0: the paws-only task, 1: the full one) scales the body
@@ -173,12 +174,12 @@ class DanceEnv:
 
     def targets_at(self, ahead_steps: int) -> torch.Tensor:
         """(N, 4) paw targets `ahead_steps` policy steps from now (held at the sequence's end)."""
-        return self._bank_at(ahead_steps)[:, :4]
+        return self._bank_at(ahead_steps)[:, PAWS]
 
     def body_targets_at(self, ahead_steps: int) -> torch.Tensor:
         """(N, 4) body targets (height offset m, roll, pitch, yaw rad) `ahead_steps` from now;
         zeros for a paws-only dance."""
-        body = self._bank_at(ahead_steps)[:, 4:]
+        body = self._bank_at(ahead_steps)[:, BODY]
         return body if self.curriculum_scale == 1.0 else body * self.curriculum_scale
 
     # --- VecEnv interface ----------------------------------------------------------------------
