@@ -4,7 +4,8 @@ the choreographer, the simulator, the policy contract and the robot runner all r
 
 A target row (one per policy step) is ``[paws | body]``: the four paw-height targets
 (`PAW_COLUMNS`, m), then, for a whole-body dance, the four trunk targets (`BODY_COLUMNS`,
-relative to standing). Slice a (T, C) array of rows with `PAWS`, `FRONT_PAWS` and `BODY`;
+relative to standing). Slice a (T, C) array of rows with `PAWS`, `FRONT_PAWS`, `REAR_PAWS`
+and `BODY` (paw slices also fit the robot's measured paw heights, in the same order);
 `row_width` says how many columns a row has.
 """
 
@@ -20,8 +21,9 @@ N_PAWS = len(PAW_COLUMNS)
 N_BODY = len(BODY_COLUMNS)
 #: The paw columns of a row.
 PAWS = slice(0, N_PAWS)
-#: The front paws (FL, FR), the ones that dance; the rear ones stay down.
+#: The front paws (FL, FR), the ones that dance, and the rear ones, which stay down.
 FRONT_PAWS = slice(0, 2)
+REAR_PAWS = slice(2, N_PAWS)
 #: The trunk columns of a row.
 BODY = slice(N_PAWS, N_PAWS + N_BODY)
 

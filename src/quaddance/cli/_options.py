@@ -25,10 +25,6 @@ RobotIpOpt = Annotated[str, typer.Option(help="go1: the robot's low-level IP.")]
 PowerLevelOpt = Annotated[
     int, typer.Option(help="go1: SDK PowerProtect level, 1 (10 %) to 10.", min=1, max=10)
 ]
-MovesOpt = Annotated[
-    Path | None,
-    typer.Option(help="TOML file of extra body moves and styles (see choreo/moves_file.py)."),
-]
 
 
 def finite_in(lo: float, hi: float):

@@ -8,8 +8,9 @@ from typing import Annotated, Any
 
 import typer
 
+from quaddance.cli._dance_spec import ModeOpt, MovesOpt, SeedOpt, StyleOpt, dance_spec
 from quaddance.cli._exit import exit_without_teardown
-from quaddance.cli._options import MovesOpt, PolicyOpt, SeedRange
+from quaddance.cli._options import PolicyOpt
 
 
 def dance_cmd(
@@ -21,29 +22,24 @@ def dance_cmd(
         Path | None, typer.Option(help="Human motion (EDGE/AIST++ .pkl, .bvh) instead of ours.")
     ] = None,
     policy: PolicyOpt = None,
-    mode: Annotated[str, typer.Option(help="Targets: feasible, paper or minmax.")] = "feasible",
-    seed: Annotated[int, typer.Option(help="Choreographer seed.", **SeedRange)] = 0,
+    mode: ModeOpt = "feasible",
+    seed: SeedOpt = 0,
     out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")] = Path("dance_out"),
     no_video: Annotated[bool, typer.Option("--no-video", help="Skip the video.")] = False,
     randomize: Annotated[
         bool, typer.Option(help="Randomise the robot's dynamics as in training.")
     ] = False,
-    style: Annotated[str, typer.Option(help="Choreography style.")] = "mixed",
+    style: StyleOpt = "mixed",
     moves: MovesOpt = None,
 ) -> None:
     """Make the Go1 dance to a song: dance.mp4 (with the music), feet.png, metrics.json,
     dance.npz and rollout.npz."""
     from rich.console import Console
 
-    from quaddance.choreo.moves_file import load_moves
-    from quaddance.layout import MODES
-    from quaddance.pipeline import DanceSpec
     from quaddance.play.dance import DanceJob, run_dance
     from quaddance.play.metrics import summary_table
-    from quaddance.targets import TargetConfig
 
-    if mode not in MODES:
-        raise typer.BadParameter(f"--mode must be one of {', '.join(MODES)}, got {mode!r}")
+    spec = dance_spec(mode, style, seed, moves)
     if demo:
         if song is not None:
             raise typer.BadParameter("give a SONG or --demo, not both")
@@ -60,12 +56,7 @@ def dance_cmd(
         song=song,
         motion=motion,
         policy=policy,
-        spec=DanceSpec(
-            style=style,
-            seed=seed,
-            moves=None if moves is None else load_moves(moves),
-            targets=TargetConfig(mode=mode),
-        ),
+        spec=spec,
         video=not no_video,
         randomize=randomize,
         analysis_process=True,

@@ -7,6 +7,7 @@ from typing import Annotated
 
 import typer
 
+from quaddance.cli._dance_spec import ModeOpt, MovesOpt, SeedOpt, StyleOpt, dance_spec
 from quaddance.cli._options import PolicyOpt, PowerLevelOpt, RobotIpOpt, RobotOpt, finite_in
 
 
@@ -21,6 +22,10 @@ def deploy_cmd(
     motion: Annotated[
         Path | None, typer.Option(help="Human motion (EDGE/AIST++ .pkl, .bvh) to dance.")
     ] = None,
+    mode: ModeOpt = "feasible",
+    style: StyleOpt = "mixed",
+    seed: SeedOpt = 0,
+    moves: MovesOpt = None,
     robot: RobotOpt = "sim",
     policy: PolicyOpt = None,
     seconds: Annotated[
@@ -64,6 +69,7 @@ def deploy_cmd(
         motion=motion,
         dance=dance,
         demo=demo,
+        spec=dance_spec(mode, style, seed, moves),
         policy=policy,
         seconds=seconds,
         auto_start=auto_start,

@@ -7,14 +7,8 @@ from typing import Annotated
 
 import typer
 
-from quaddance.cli._options import (
-    PolicyOpt,
-    PowerLevelOpt,
-    RobotIpOpt,
-    RobotOpt,
-    SeedRange,
-    finite_in,
-)
+from quaddance.cli._dance_spec import ModeOpt, MovesOpt, SeedOpt, StyleOpt, dance_spec
+from quaddance.cli._options import PolicyOpt, PowerLevelOpt, RobotIpOpt, RobotOpt, finite_in
 
 
 def live_cmd(
@@ -56,8 +50,10 @@ def live_cmd(
     video: Annotated[
         bool, typer.Option("--video", help="With --from-file: write dance.mp4 afterwards.")
     ] = False,
-    style: Annotated[str, typer.Option(help="Choreography style.")] = "mixed",
-    seed: Annotated[int, typer.Option(help="Choreography seed.", **SeedRange)] = 0,
+    mode: ModeOpt = "feasible",
+    style: StyleOpt = "mixed",
+    seed: SeedOpt = 0,
+    moves: MovesOpt = None,
     out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")] = Path("live_out"),
     robot_ip: RobotIpOpt = "192.168.123.10",
     power_level: PowerLevelOpt = 1,
@@ -69,7 +65,6 @@ def live_cmd(
 
     from quaddance.deploy.job import BackendOptions
     from quaddance.live.session import LiveJob, run_live, summary_line
-    from quaddance.pipeline import DanceSpec
 
     console = Console(stderr=True)
     job = LiveJob(
@@ -84,7 +79,7 @@ def live_cmd(
         host=host,
         port=port,
         video=video,
-        spec=DanceSpec(style=style, seed=seed),
+        spec=dance_spec(mode, style, seed, moves),
     )
     summary, paths = run_live(job, status=lambda msg: console.log(msg))
     console.print(summary_line(summary))

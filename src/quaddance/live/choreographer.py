@@ -4,9 +4,9 @@ tracker predicts, and streamed as robot targets (paws and trunk) at the policy r
 The dance composer (`pipeline.compose`, the one that makes every dance) plans each segment
 on a small `MusicGrid` of the predicted beats of the next segment (one to two bars, ending on
 a downbeat), so a live dance is made of the same moves and the same feasible targets as a
-planned one. Segments overlap by `TAIL_BEATS`: a lift or gesture on
-the last beat finishes in the next segment's time (paws: the higher target; trunk:
-cross-faded). Without a stable lock the robot holds a calm standing pose.
+planned one. Segments overlap by `TAIL_BEATS`: a lift or gesture on the last beat finishes
+in the next segment's time (paws: the higher target; trunk: cross-faded). Without a stable
+lock the robot holds a calm standing pose.
 
 Rows are committed up to `planned_until_step` only (what follows is a tail that the next
 segment may still change); `LOOKAHEAD_S` keeps them ahead of the dance, preview included

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from quaddance.errors import QuaddanceError
+from quaddance.layout import FRONT_PAWS, REAR_PAWS
 
 
 def default_feasible_max_m() -> float:
@@ -153,7 +154,7 @@ def feasible_mask(
     targets = _check_feet("targets_m", targets_m)
     if feasible_max_m is None:
         feasible_max_m = default_feasible_max_m()
-    front = targets[:, :2]
+    front = targets[:, FRONT_PAWS]
     in_range = (front >= -ground_tol_m) & (front <= feasible_max_m)
     other_down = np.abs(front[:, ::-1]) <= ground_tol_m
     return in_range & other_down
@@ -300,10 +301,12 @@ def dance_metrics(
         raise QuaddanceError("time_s must increase")
     duration_s = float(time[-1] - time[0] + dt_s)
     feasible = feasible_mask(targets, feasible_max_m, ground_tol_m)
-    rear = feet[:, 2:4]
+    rear = feet[:, REAR_PAWS]
     # Lift is height above the floor; soft-contact penetration (< 0) is no lift.
     rear = np.clip(rear[np.isfinite(rear)], 0.0, None)
-    bas = beat_align_score(feet[:, :2], 1.0 / dt_s, np.asarray(beats_s, dtype=float) - time[0])
+    bas = beat_align_score(
+        feet[:, FRONT_PAWS], 1.0 / dt_s, np.asarray(beats_s, dtype=float) - time[0]
+    )
     return {
         "duration_s": duration_s,
         "falls_s": [float(t) for t in falls_s],

@@ -13,6 +13,7 @@ import numpy as np
 
 from quaddance.errors import QuaddanceError
 from quaddance.fileio import atomic_path
+from quaddance.layout import FRONT_PAWS
 
 DPI = 120
 FOOT_COLOURS = {"FL": "tab:orange", "FR": "tab:blue", "RL": "tab:green", "RR": "tab:purple"}
@@ -94,8 +95,8 @@ def plot_feet(
     # the panels' labels never change length.
     fig.subplots_adjust(left=0.075, right=0.985, top=0.95, bottom=0.06, hspace=0.12)
     front_top_m = max(
-        float(np.nanmax(targets[:, :2], initial=0.0)),
-        float(np.nanmax(feet[:, :2], initial=0.0)),
+        float(np.nanmax(targets[:, FRONT_PAWS], initial=0.0)),
+        float(np.nanmax(feet[:, FRONT_PAWS], initial=0.0)),
         0.05,
     )
     for ax, i, name in [(axes[0], 0, "FL"), (axes[1], 1, "FR")]:

@@ -1,0 +1,54 @@
+"""The options that choose a dance (``--mode``, ``--style``, ``--seed``, ``--moves``), the
+same in choreograph, dance, deploy and live, and the `DanceSpec` they make."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
+
+import typer
+
+from quaddance.cli._options import SeedRange
+
+if TYPE_CHECKING:
+    from quaddance.pipeline import DanceSpec
+    from quaddance.targets import TargetConfig
+
+ModeOpt = Annotated[
+    str,
+    typer.Option(
+        help="Targets: feasible (reachable, returns to 0), paper (eq. 4) or minmax (released code)."
+    ),
+]
+StyleOpt = Annotated[
+    str,
+    typer.Option(help="Choreographer style: mixed, calm, energetic or footwork (or --moves')."),
+]
+SeedOpt = Annotated[
+    int, typer.Option(help="Choreographer seed: another seed, another dance.", **SeedRange)
+]
+MovesOpt = Annotated[
+    Path | None,
+    typer.Option(help="TOML file of extra body moves and styles (see choreo/moves_file.py)."),
+]
+
+
+def dance_spec(
+    mode: str, style: str, seed: int, moves: Path | None, targets: TargetConfig | None = None
+) -> DanceSpec:
+    """The `DanceSpec` of the dance options, with ``targets``' other settings. The moves
+    file is read here, so that a bad one fails before any work."""
+    from quaddance.layout import MODES
+    from quaddance.pipeline import DanceSpec
+    from quaddance.targets import TargetConfig
+
+    if mode not in MODES:
+        raise typer.BadParameter(f"--mode must be one of {', '.join(MODES)}, got {mode!r}")
+    move_set = None
+    if moves is not None:
+        from quaddance.choreo.moves_file import load_moves
+
+        move_set = load_moves(moves)
+    targets = dataclasses.replace(targets or TargetConfig(), mode=mode)
+    return DanceSpec(style=style, seed=seed, moves=move_set, targets=targets)
