@@ -551,7 +551,7 @@ def _shipped_json_v2() -> dict:
     import json
 
     from quaddance.play.policy_spec import FORMAT, PolicySpec
-    from quaddance.sim.config import task_record
+    from quaddance.sim.records import task_record
 
     path, meta = _shipped_json()
     task = task_record(PolicySpec.load(path).task_cfg)

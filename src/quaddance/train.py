@@ -29,7 +29,8 @@ from quaddance.fileio import atomic_path
 from quaddance.layout import row_width
 from quaddance.play.policy_spec import FORMAT
 from quaddance.sim import tasks
-from quaddance.sim.config import DanceTaskCfg, task_record
+from quaddance.sim.config import DanceTaskCfg
+from quaddance.sim.records import task_record
 
 
 @dataclass(frozen=True)
@@ -288,8 +289,8 @@ class Trainer:
 
     def _init_from(self, path: Path) -> None:
         """Copy another run's actor and critic, input column by input column (by name)."""
-        from quaddance.sim.config import task_from_record
         from quaddance.sim.observations import ActorObservation, ObsLayout
+        from quaddance.sim.records import task_from_record
 
         if not path.is_file():
             raise InputFileError(path, "no such checkpoint (--init-from)")

@@ -29,7 +29,8 @@ import numpy as np
 
 from quaddance.errors import InputFileError
 from quaddance.robots import GO1, ROBOTS, RobotCfg, get_robot
-from quaddance.sim.config import SOURCES, DanceTaskCfg, ObsSlice, reward_term, task_from_record
+from quaddance.sim.config import SOURCES, DanceTaskCfg, ObsSlice
+from quaddance.sim.records import reward_term, task_from_record
 
 FORMAT = "quaddance-policy/2"
 """Schema version written in ``format``."""
