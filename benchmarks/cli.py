@@ -11,7 +11,7 @@ from typing import Annotated, Any
 
 import typer
 
-from quaddance.cli._options import PolicyOpt, finite_in
+from quaddance.cli.options import PolicyOpt, finite_in
 
 app = typer.Typer(no_args_is_help=True, help="Benchmarks; each writes a JSON file of results.")
 

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from quaddance.cli._options import SeedRange
+from quaddance.cli.options import SeedRange
 
 if TYPE_CHECKING:
     from quaddance.pipeline import DanceSpec

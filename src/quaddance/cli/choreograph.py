@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from quaddance.cli._dance_spec import ModeOpt, MovesOpt, SeedOpt, StyleOpt, dance_spec
-from quaddance.cli._options import finite_in
+from quaddance.cli.options import finite_in
 
 
 def choreograph_cmd(

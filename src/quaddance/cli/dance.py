@@ -10,7 +10,7 @@ import typer
 
 from quaddance.cli._dance_spec import ModeOpt, MovesOpt, SeedOpt, StyleOpt, dance_spec
 from quaddance.cli._exit import exit_without_teardown
-from quaddance.cli._options import PolicyOpt
+from quaddance.cli.options import PolicyOpt
 
 
 def dance_cmd(

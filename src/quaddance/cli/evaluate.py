@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from quaddance.cli._options import SEED_MAX, PolicyOpt
+from quaddance.cli.options import SEED_MAX, PolicyOpt
 
 
 def eval_cmd(

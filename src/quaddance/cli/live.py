@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from quaddance.cli._dance_spec import ModeOpt, MovesOpt, SeedOpt, StyleOpt, dance_spec
-from quaddance.cli._options import PolicyOpt, PowerLevelOpt, RobotIpOpt, RobotOpt, finite_in
+from quaddance.cli.options import PolicyOpt, PowerLevelOpt, RobotIpOpt, RobotOpt, finite_in
 
 
 def live_cmd(

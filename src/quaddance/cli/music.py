@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from quaddance.cli._options import SongArg
+from quaddance.cli.options import SongArg
 
 
 def analyze_cmd(

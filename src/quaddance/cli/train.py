@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from quaddance.cli._options import SeedRange, finite_in
+from quaddance.cli.options import SeedRange, finite_in
 
 
 def train_cmd(
