@@ -256,12 +256,14 @@ def _play(
     obs = env.get_observations()["actor"].numpy()
     start = time.perf_counter()
     for t in range(n_steps):
-        qpos[t] = env.engine.read().qpos[0].numpy()
-        feet[t] = env.robot.foot_height_m[0].numpy()
-        targets[t] = env.targets_at(0)[0].numpy()
-        body_targets[t] = env.body_targets_at(0)[0].numpy()
-        base_height[t] = float(env.robot.base_pos_w[0, 2])
-        base_rpy[t] = env.robot.base_rpy_rad[0].numpy()
+        # Rows read through numpy: indexing the tensors would cost a torch op each.
+        robot = env.robot
+        qpos[t] = env.engine.read().qpos.numpy()[0]
+        feet[t] = robot.foot_height_m.numpy()[0]
+        targets[t] = env.targets_at(0).numpy()[0]
+        body_targets[t] = env.body_targets_at(0).numpy()[0]
+        base_height[t] = robot.base_pos_w.numpy()[0, 2]
+        base_rpy[t] = robot.base_rpy_rad.numpy()[0]
         if on_pose is not None:
             on_pose(t, qpos[t], targets[t])
         if t in pushes:
@@ -269,8 +271,8 @@ def _play(
             pushed_s.append(t / cfg.policy_hz)
         action = zero_action if zero_output else torch.from_numpy(policy.act(obs))
         obs_td, _, done, extras = env.step(action)
-        if bool(done[0]):
-            if not bool(extras["time_outs"][0]):
+        if done.numpy()[0]:
+            if not extras["time_outs"].numpy()[0]:
                 falls.append((t + 1) / cfg.policy_hz)
             env.bank_offset[0] = t + 1  # carry on from where the song is
             obs_td = env.get_observations()

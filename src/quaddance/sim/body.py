@@ -10,20 +10,52 @@ and the robot runner alike (through `sim.task.joint_targets`).
 
 from __future__ import annotations
 
+import functools
+
 import torch
 
 from quaddance.robots import RobotCfg
 from quaddance.sim.kinematics import LegGeometry, foot_pos_b, leg_geometry
 
 
+#: `rpy_matrix`'s nine entries, each ``a * b * c + sign * (d * e)`` over the table
+#: [cos r, cos p, cos y, 1, sin r, sin p, sin y, 0] (indices below): R = R_z R_y R_x.
+_CR, _CP, _CY, _ONE, _SR, _SP, _SY, _ZERO = range(8)
+_RPY_FACTORS = (
+    # r00 = cy cp, r01 = cy sp sr - sy cr, r02 = cy sp cr + sy sr
+    (_CY, _CP, _ONE, _ZERO, _ZERO, 0.0),
+    (_CY, _SP, _SR, _SY, _CR, -1.0),
+    (_CY, _SP, _CR, _SY, _SR, 1.0),
+    # r10 = sy cp, r11 = sy sp sr + cy cr, r12 = sy sp cr - cy sr
+    (_SY, _CP, _ONE, _ZERO, _ZERO, 0.0),
+    (_SY, _SP, _SR, _CY, _CR, 1.0),
+    (_SY, _SP, _CR, _CY, _SR, -1.0),
+    # r20 = -sp, r21 = cp sr, r22 = cp cr
+    (_ZERO, _ONE, _ONE, _SP, _ONE, -1.0),
+    (_CP, _SR, _ONE, _ZERO, _ZERO, 0.0),
+    (_CP, _CR, _ONE, _ZERO, _ZERO, 0.0),
+)
+
+
+@functools.lru_cache(maxsize=8)
+def _rpy_factors(device: torch.device, dtype: torch.dtype) -> tuple[torch.Tensor, ...]:
+    """(45,) `_RPY_FACTORS`' table indices, factor by factor, (9,) their signs, and the
+    index and mask that make (r, p, y, 0) of (r, p, y)."""
+    with torch.inference_mode(False):  # usable in and out of inference mode
+        index = torch.tensor([row[:5] for row in _RPY_FACTORS], device=device).T.reshape(-1)
+        sign = torch.tensor([row[5] for row in _RPY_FACTORS], device=device, dtype=dtype)
+        angle_index = torch.tensor([0, 1, 2, 0], device=device)
+        angle_mask = torch.tensor([1.0, 1.0, 1.0, 0.0], device=device, dtype=dtype)
+        return index, sign, angle_index, angle_mask
+
+
 def rpy_matrix(rpy: torch.Tensor) -> torch.Tensor:
     """(N, 3) roll, pitch, yaw (rad, extrinsic x-y-z = R_z R_y R_x) -> (N, 3, 3) rotations."""
-    r, p, y = rpy.unbind(-1)
-    cr, sr, cp, sp, cy, sy = r.cos(), r.sin(), p.cos(), p.sin(), y.cos(), y.sin()
-    row0 = torch.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], -1)
-    row1 = torch.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], -1)
-    row2 = torch.stack([-sp, cp * sr, cp * cr], -1)
-    return torch.stack([row0, row1, row2], -2)
+    index, sign, angle_index, angle_mask = _rpy_factors(rpy.device, rpy.dtype)
+    angles = rpy.index_select(1, angle_index) * angle_mask  # r, p, y, 0: the 1 and the 0
+    table = torch.cat([angles.cos(), angles.sin()], dim=1)
+    a, b, c, d, e = table.index_select(1, index).view(-1, 5, 9).unbind(1)
+    return (a * b * c + sign * (d * e)).view(-1, 3, 3)
 
 
 def leg_ik(foot_b: torch.Tensor, geom: LegGeometry) -> torch.Tensor:
@@ -34,26 +66,19 @@ def leg_ik(foot_b: torch.Tensor, geom: LegGeometry) -> torch.Tensor:
     is lateral and both links point straight down at zero angle, as `leg_geometry` checks).
     Out-of-reach points are pulled onto the workspace boundary instead of giving NaN.
     """
-    t = lambda name: geom.tensor(name, foot_b)  # noqa: E731
-    ty = t("thigh_offset")[:, 1]  # (4,) lateral thigh offset, m: left legs +
-    l2 = -t("calf_offset")[:, 2]  # thigh link length
-    l3 = -t("foot_offset")[:, 2]  # calf link length
-    d = foot_b - t("hip_pos_b")
-    dy, dz = d[..., 1], d[..., 2]
+    t = geom.tensors(foot_b)
+    d = foot_b - t.hip_pos_b
+    vx, dy, dz = d.unbind(-1)
     # Hip: the leg plane sits ty to the side; the foot is at depth vz below the hip in it.
-    vz = -(dy**2 + dz**2 - ty**2).clamp(min=1e-6).sqrt()
-    hip = torch.atan2(dz, dy) - torch.atan2(vz, ty.expand_as(vz))
-    vx = d[..., 0]
-    r2 = (vx**2 + vz**2).clamp(max=(l2 + l3) ** 2 * 0.9999)
-    cos_knee = ((r2 - l2**2 - l3**2) / (2 * l2 * l3)).clamp(-1.0, 1.0)
+    vz = -(dy * dy + dz * dz - t.thigh_y_sq).clamp(min=1e-6).sqrt()
+    hip = torch.atan2(dz, dy) - torch.atan2(vz, t.thigh_y)
+    r2 = (vx * vx + vz * vz).clamp(max=t.max_reach_sq)
+    cos_knee = ((r2 - t.thigh_len_sq - t.calf_len_sq) / t.two_thigh_calf).clamp(-1.0, 1.0)
     calf = -torch.acos(cos_knee)  # knees bend backwards (as the Go1's): calf angles < 0
     phi = torch.atan2(-vx, -vz)  # direction of the foot from straight down
-    thigh = phi - torch.atan2(l3 * torch.sin(calf), l2 + l3 * torch.cos(calf))
+    thigh = phi - torch.atan2(t.calf_len * calf.sin(), t.thigh_len + t.calf_len * calf.cos())
     q_task = torch.stack([hip, thigh, calf], -1)  # (N, 4 feet, 3)
-    n_joints = q_task.shape[1] * q_task.shape[2]
-    out = torch.empty(foot_b.shape[0], n_joints, dtype=foot_b.dtype, device=foot_b.device)
-    out[:, t("joint_cols").reshape(-1)] = q_task.reshape(-1, n_joints)
-    return out
+    return q_task.view(q_task.shape[0], -1).index_select(1, t.to_model)
 
 
 class BodyFeedforward:
@@ -66,14 +91,13 @@ class BodyFeedforward:
         self.nominal = nominal.to(device)
         self.feet0_b = foot_pos_b(nominal, self.geom).to(device)  # (1, 4, 3)
         self.q0 = leg_ik(self.feet0_b, self.geom)  # the nominal pose through the same IK
+        self.up = torch.tensor([0.0, 0.0, 1.0], device=device)
 
     def feet_b(self, body: torch.Tensor) -> torch.Tensor:
         """(N, 4, 3) where the standing feet are in the trunk frame for trunk pose ``body``."""
         rot = rpy_matrix(body[:, 1:4])  # trunk orientation relative to the standing pose
-        lift = torch.zeros_like(body[:, :3])
-        lift[:, 2] = body[:, 0]
-        rel = self.feet0_b - lift[:, None, :]  # feet relative to the moved trunk, old axes
-        return torch.einsum("nji,nkj->nki", rot, rel)  # R^T (p - dz e_z)
+        rel = self.feet0_b - body[:, :1, None] * self.up  # feet relative to the moved trunk
+        return torch.bmm(rel, rot)  # R^T (p - dz e_z), row by row
 
     def __call__(self, body: torch.Tensor) -> torch.Tensor:
         # Offsets from the IK's own nominal solution, so zero targets give exactly zero.

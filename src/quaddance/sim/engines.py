@@ -122,7 +122,7 @@ class CpuEngine:
 
     def step(self, ctrl: torch.Tensor) -> EngineOutput:
         """Advance all envs by ctrl.shape[1] substeps; ctrl (N, nsub, nu) position targets."""
-        c = np.ascontiguousarray(ctrl.double().cpu().numpy())
+        c = np.asarray(ctrl.detach().numpy(), dtype=np.float64)  # a copy: float32 -> float64
         nsub = c.shape[1]
         if self._out_state is None or self._out_state.shape[1] != nsub:
             self._out_state = np.empty((self.num_envs, nsub, self.nstate))
@@ -144,10 +144,12 @@ class CpuEngine:
         return self.read()
 
     def read(self) -> EngineOutput:
+        # Float32 copies made by numpy: no torch op per array (playback steps one env).
+        f32 = lambda a: torch.from_numpy(a.astype(np.float32))  # noqa: E731
         return EngineOutput(
-            qpos=torch.from_numpy(self._qpos(self.state)).float(),
-            qvel=torch.from_numpy(self._qvel(self.state)).float(),
-            sensordata=torch.from_numpy(self.sensordata).float(),
+            qpos=f32(self._qpos(self.state)),
+            qvel=f32(self._qvel(self.state)),
+            sensordata=f32(self.sensordata),
         )
 
 

@@ -75,19 +75,24 @@ class FrontLiftFeedforward:
         if table.shape != (heights_m.size, 2):
             raise ValueError(f"feed-forward table must be {(heights_m.size, 2)}, got {table.shape}")
         self.table = torch.as_tensor(table, dtype=torch.float32, device=device)
+        # Row k: the offsets at heights k and k + 1 side by side, read with one index.
+        self._pairs = torch.cat([self.table[:-1], self.table[1:]], dim=1).view(-1, 2, 2)
         self.h_max = float(heights_m[-1])
-        self.dh = float(heights_m[1] - heights_m[0])
+        self.dh = torch.tensor(float(heights_m[1] - heights_m[0]), device=device)
+        self._one = torch.ones((), device=device)
         self.num_joints = robot.num_joints
-        # (thigh, calf) joint indices of the two front feet in model order.
-        self.cols = [robot.leg_joint_cols(foot)[1:] for foot in robot.feet[:2]]
+        # Each model joint's column in the offsets [FL thigh, FL calf, FR thigh, FR calf]; the
+        # other joints read column 0, zeroed by the mask.
+        cols = [c for foot in robot.feet[:2] for c in robot.leg_joint_cols(foot)[1:]]
+        to_model = [cols.index(j) if j in cols else 0 for j in range(self.num_joints)]
+        self._to_model = torch.tensor(to_model, device=device)
+        self._mask = torch.tensor([float(j in cols) for j in range(self.num_joints)], device=device)
 
     def __call__(self, front_targets_m: torch.Tensor) -> torch.Tensor:
         u = front_targets_m.clamp(0.0, self.h_max) / self.dh
-        k = u.floor().long().clamp(max=self.table.shape[0] - 2)
+        k = u.floor().clamp(max=self.table.shape[0] - 2)
         w = (u - k).unsqueeze(-1)
-        offs = self.table[k] * (1 - w) + self.table[k + 1] * w  # (N, 2 feet, 2 joints)
-        out = torch.zeros(front_targets_m.shape[0], self.num_joints, device=u.device)
-        for f, (ti, ci) in enumerate(self.cols):
-            out[:, ti] = offs[:, f, 0]
-            out[:, ci] = offs[:, f, 1]
-        return out
+        pairs = self._pairs.index_select(0, k.view(-1).long()).view(-1, 2, 2, 2)
+        low, high = pairs.unbind(-2)  # (N, 2 feet, 2 joints) each
+        offs = (low * (self._one - w) + high * w).view(-1, 4)
+        return offs.index_select(1, self._to_model) * self._mask

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import torch
@@ -35,17 +36,91 @@ class LegGeometry:
     def _tensors(self) -> dict:
         return {}
 
-    def tensor(self, name: str, like: torch.Tensor) -> torch.Tensor:
-        """Field ``name`` as a tensor of ``like``'s dtype and device, made once per dtype and
+    def tensors(self, like: torch.Tensor) -> LegTensors:
+        """The geometry as tensors of ``like``'s dtype and device, made once per dtype and
         device instead of at every call (the kinematics run every policy step)."""
-        key = (name, like.dtype, like.device)
+        key = (like.dtype, like.device)
         out = self._tensors.get(key)
         if out is None:
-            dtype = torch.long if name == "joint_cols" else like.dtype
             with torch.inference_mode(False):  # usable in and out of inference mode
-                out = torch.as_tensor(getattr(self, name), dtype=dtype, device=like.device)
+                out = LegTensors.of(self, like.dtype, like.device)
             self._tensors[key] = out
         return out
+
+
+class _Axis(NamedTuple):
+    """A rotation about one axis written as ``R v = v * C + v[swap] * S``: ``C`` holds the
+    cosine or 1 and ``S`` the signed sine or 0, per component. The 1s and 0s are the cosine
+    and sine of the angle 0, so one cos and one sin give the factors of every rotation."""
+
+    uses_angle: tuple[int, int, int]  # 1: the joint angle, 0: the angle 0
+    sin_sign: tuple[float, float, float]
+    swap: tuple[int, int, int]
+
+
+# R_y(a) v = (c v0 + s v2, v1, c v2 - s v0); R_x(a) v = (v0, c v1 - s v2, c v2 + s v1).
+_ABOUT_Y = _Axis((1, 0, 1), (1.0, 1.0, -1.0), (2, 1, 0))
+_ABOUT_X = _Axis((0, 1, 1), (1.0, -1.0, 1.0), (0, 2, 1))
+
+
+@dataclass(frozen=True)
+class LegTensors:
+    """`LegGeometry` as tensors, with the constants the batched kinematics derive from it:
+    the factors of the chain's three rotations (calf and thigh about y, hip about x, each an
+    `_Axis`) and the leg IK's lengths."""
+
+    hip_pos_b: torch.Tensor  # (4, 3)
+    thigh_offset: torch.Tensor  # (4, 3)
+    calf_offset: torch.Tensor  # (4, 3)
+    foot_offset: torch.Tensor  # (4, 3)
+    #: (4 * 3 * 3,) per foot, per rotation (calf, thigh, hip), per component: the column of
+    #: the joint angle there, and 1, or 0 where the rotation needs the angle 0.
+    angle_index: torch.Tensor
+    angle_mask: torch.Tensor
+    sin_sign: torch.Tensor  # (3, 3) per rotation, per component
+    swap: tuple[torch.Tensor, torch.Tensor, torch.Tensor]  # per rotation: (3,) components
+    to_model: torch.Tensor  # (12,) task-order (foot, joint) column of each model joint
+    # Leg IK (`quaddance.sim.body.leg_ik`): squared lateral thigh offset, link lengths.
+    thigh_y: torch.Tensor  # (4,)
+    thigh_y_sq: torch.Tensor  # (4,)
+    thigh_len: torch.Tensor  # (4,)
+    calf_len: torch.Tensor  # (4,)
+    thigh_len_sq: torch.Tensor  # (4,)
+    calf_len_sq: torch.Tensor  # (4,)
+    two_thigh_calf: torch.Tensor  # (4,) 2 l2 l3
+    max_reach_sq: torch.Tensor  # (4,) (l2 + l3)^2, a hair inside
+
+    @classmethod
+    def of(cls, geom: LegGeometry, dtype: torch.dtype, device: torch.device) -> LegTensors:
+        t = lambda a: torch.as_tensor(np.asarray(a), dtype=dtype, device=device)  # noqa: E731
+        long = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.long, device=device)  # noqa: E731
+        rotations = (_ABOUT_Y, _ABOUT_Y, _ABOUT_X)  # calf, thigh, hip
+        index = [
+            [[geom.joint_cols[f, joint]] * 3 for joint in (2, 1, 0)]
+            for f in range(geom.joint_cols.shape[0])
+        ]
+        mask = [[rot.uses_angle for rot in rotations]] * geom.joint_cols.shape[0]
+        ty = t(geom.thigh_offset[:, 1])  # lateral thigh offset, m: left legs +
+        l2, l3 = -t(geom.calf_offset[:, 2]), -t(geom.foot_offset[:, 2])
+        return cls(
+            hip_pos_b=t(geom.hip_pos_b),
+            thigh_offset=t(geom.thigh_offset),
+            calf_offset=t(geom.calf_offset),
+            foot_offset=t(geom.foot_offset),
+            angle_index=long(index).reshape(-1),
+            angle_mask=t(mask).reshape(-1),
+            sin_sign=t([rot.sin_sign for rot in rotations]),
+            swap=tuple(long(rot.swap) for rot in rotations),
+            to_model=long(np.argsort(geom.joint_cols.reshape(-1))),
+            thigh_y=ty,
+            thigh_y_sq=ty**2,
+            thigh_len=l2,
+            calf_len=l3,
+            thigh_len_sq=l2**2,
+            calf_len_sq=l3**2,
+            two_thigh_calf=2 * l2 * l3,
+            max_reach_sq=(l2 + l3) ** 2 * 0.9999,
+        )
 
 
 @functools.lru_cache(maxsize=4)
@@ -75,28 +150,21 @@ def leg_geometry(robot: RobotCfg) -> LegGeometry:
     )
 
 
-def _rot_x(angle: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
-    c, s = torch.cos(angle), torch.sin(angle)
-    return torch.stack(
-        [v[..., 0], c * v[..., 1] - s * v[..., 2], s * v[..., 1] + c * v[..., 2]], -1
-    )
-
-
-def _rot_y(angle: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
-    c, s = torch.cos(angle), torch.sin(angle)
-    return torch.stack(
-        [c * v[..., 0] + s * v[..., 2], v[..., 1], -s * v[..., 0] + c * v[..., 2]], -1
-    )
+def _rotate(v: torch.Tensor, cos: torch.Tensor, sin: torch.Tensor, swap: torch.Tensor):
+    """``R v`` (..., 3) for rotations about one axis, factors as `_Axis` describes them."""
+    return v * cos + v.index_select(-1, swap) * sin
 
 
 def foot_pos_b(joint_pos: torch.Tensor, geom: LegGeometry) -> torch.Tensor:
     """(N, 12) joint angles, model order, rad -> (N, 4, 3) foot sphere centres in the trunk
     frame, m, task foot order."""
-    t = lambda name: geom.tensor(name, joint_pos)  # noqa: E731
-    q = joint_pos[:, t("joint_cols").reshape(-1)].reshape(-1, 4, 3)
-    p = t("calf_offset") + _rot_y(q[..., 2], t("foot_offset").expand(q.shape[0], 4, 3))
-    p = t("thigh_offset") + _rot_y(q[..., 1], p)
-    return t("hip_pos_b") + _rot_x(q[..., 0], p)
+    t = geom.tensors(joint_pos)
+    angles = joint_pos.index_select(1, t.angle_index) * t.angle_mask
+    angles = angles.view(-1, 4, 3, 3)  # (N, foot, rotation: calf thigh hip, component)
+    cos, sin = angles.cos().unbind(2), (angles.sin() * t.sin_sign).unbind(2)
+    p = t.calf_offset + _rotate(t.foot_offset, cos[0], sin[0], t.swap[0])
+    p = t.thigh_offset + _rotate(p, cos[1], sin[1], t.swap[1])
+    return t.hip_pos_b + _rotate(p, cos[2], sin[2], t.swap[2])
 
 
 def estimate_foot_height_m(
@@ -109,6 +177,7 @@ def estimate_foot_height_m(
     lowest foot reads 0; on flat ground with three feet down this equals the true height of
     each foot's bottom above the floor up to contact penetration (a few mm).
     """
-    up_b = -projected_gravity_b / projected_gravity_b.norm(dim=1, keepdim=True).clamp(min=1e-6)
+    norm = torch.linalg.vector_norm(projected_gravity_b, dim=1, keepdim=True).clamp(min=1e-6)
+    up_b = -projected_gravity_b / norm
     z = (foot_pos_b(joint_pos, geom) * up_b[:, None, :]).sum(dim=2)  # height along world up
-    return z - z.min(dim=1, keepdim=True).values
+    return z - z.amin(dim=1, keepdim=True)

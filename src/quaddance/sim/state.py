@@ -45,22 +45,76 @@ class SensorLayout:
         )
 
 
-@dataclass
 class RobotState:
-    """Batched robot state; N environments, world frame `_w`, body frame `_b`."""
+    """Batched robot state; N environments, world frame `_w`, body frame `_b`.
 
-    base_pos_w: torch.Tensor  # (N, 3) m
-    base_quat_w: torch.Tensor  # (N, 4) w, x, y, z
-    base_lin_vel_w: torch.Tensor  # (N, 3) m/s
-    base_ang_vel_b: torch.Tensor  # (N, 3) rad/s
-    joint_pos: torch.Tensor  # (N, 12) rad, model joint order
-    joint_vel: torch.Tensor  # (N, 12) rad/s
-    joint_torque: torch.Tensor  # (N, 12) N m
-    foot_pos_w: torch.Tensor  # (N, 4, 3) m, foot sphere centres, FL FR RL RR
-    foot_vel_w: torch.Tensor  # (N, 4, 3) m/s
-    base_contact: torch.Tensor  # (N,) bool
-    leg_contacts: torch.Tensor  # (N,) number of thighs/calves touching the floor
-    foot_radius_m: float
+    Made by `state_from_arrays`. Each quantity is computed from MuJoCo's arrays when it is
+    first read: playback reads a few of them per step, training most.
+    """
+
+    def __init__(
+        self, qpos: torch.Tensor, qvel: torch.Tensor, sensordata: torch.Tensor, layout: SensorLayout
+    ) -> None:
+        self._qpos, self._qvel, self._sensordata, self._layout = qpos, qvel, sensordata, layout
+        self.foot_radius_m = layout.foot_radius_m
+
+    def _sensors(self, idx: tuple[int, ...]) -> torch.Tensor:
+        return self._sensordata.index_select(1, _index(idx, self._sensordata.device))
+
+    @functools.cached_property
+    def base_pos_w(self) -> torch.Tensor:
+        """(N, 3) m."""
+        return self._qpos[:, 0:3]
+
+    @functools.cached_property
+    def base_quat_w(self) -> torch.Tensor:
+        """(N, 4) w, x, y, z."""
+        return self._qpos[:, 3:7]
+
+    @functools.cached_property
+    def base_lin_vel_w(self) -> torch.Tensor:
+        """(N, 3) m/s."""
+        return self._qvel[:, 0:3]
+
+    @functools.cached_property
+    def base_ang_vel_b(self) -> torch.Tensor:
+        """(N, 3) rad/s (MuJoCo's free joint has its angular velocity in the body frame)."""
+        return self._qvel[:, 3:6]
+
+    @functools.cached_property
+    def joint_pos(self) -> torch.Tensor:
+        """(N, 12) rad, model joint order."""
+        return self._qpos[:, 7:]
+
+    @functools.cached_property
+    def joint_vel(self) -> torch.Tensor:
+        """(N, 12) rad/s."""
+        return self._qvel[:, 6:]
+
+    @functools.cached_property
+    def joint_torque(self) -> torch.Tensor:
+        """(N, 12) N m."""
+        return self._sensors(self._layout.joint_torque)
+
+    @functools.cached_property
+    def foot_pos_w(self) -> torch.Tensor:
+        """(N, 4, 3) m, foot sphere centres, task foot order."""
+        return self._sensors(self._layout.foot_pos).view(-1, 4, 3)
+
+    @functools.cached_property
+    def foot_vel_w(self) -> torch.Tensor:
+        """(N, 4, 3) m/s."""
+        return self._sensors(self._layout.foot_vel).view(-1, 4, 3)
+
+    @functools.cached_property
+    def base_contact(self) -> torch.Tensor:
+        """(N,) bool: the trunk touches the floor."""
+        return self._sensordata[:, self._layout.base_contact] > 0.5
+
+    @functools.cached_property
+    def leg_contacts(self) -> torch.Tensor:
+        """(N,) number of thighs/calves touching the floor."""
+        return (self._sensors(self._layout.leg_contact) > 0.5).sum(dim=1)
 
     @functools.cached_property
     def foot_height_m(self) -> torch.Tensor:
@@ -76,11 +130,18 @@ class RobotState:
 
     @functools.cached_property
     def base_rpy_rad(self) -> torch.Tensor:
-        """(N, 3) roll, pitch, yaw of the trunk (extrinsic x-y-z, as `sim.body.rpy_matrix`)."""
-        w, x, y, z = self.base_quat_w.unbind(1)
-        roll = torch.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
-        pitch = torch.asin((2 * (w * y - z * x)).clamp(-1.0, 1.0))
-        return torch.stack([roll, pitch, yaw_from_quat(self.base_quat_w)], dim=1)
+        """(N, 3) roll, pitch, yaw of the trunk (extrinsic x-y-z, as `sim.body.rpy_matrix`):
+        roll = atan2(2 (w x + y z), 1 - 2 (x x + y y)), pitch = asin(2 (w y - z x)) and
+        yaw = atan2(2 (w z + x y), 1 - 2 (y y + z z)), all three in one pass."""
+        quat = self.base_quat_w
+        left, right, sign, is_pitch = _rpy_terms(quat.device, quat.dtype)
+        # (N, 2, 6): the two products of each sum, column by column.
+        prod = (quat.index_select(1, left) * quat.index_select(1, right)).view(-1, 2, 6)
+        first, second = prod.unbind(1)
+        sums = first + second * sign
+        twice = sums + sums  # 2 (w x + y z), 2 (w y - z x), 2 (w z + x y), 2 (x x + y y), ...
+        num, den = twice[:, 0:3], 1 - twice[:, 3:6]  # den's middle column is unused
+        return torch.where(is_pitch, num.clamp(-1.0, 1.0).asin(), torch.atan2(num, den))
 
     @property
     def base_yaw_rad(self) -> torch.Tensor:
@@ -90,6 +151,34 @@ class RobotState:
     @functools.cached_property
     def base_lin_vel_b(self) -> torch.Tensor:
         return quat_rotate_inverse(self.base_quat_w, self.base_lin_vel_w)
+
+
+_W, _X, _Y, _Z = range(4)
+#: `RobotState.base_rpy_rad`'s sums of two quaternion products, (first, second, sign of the
+#: second): the roll, pitch and yaw numerators, then the roll and yaw denominators (pitch's
+#: column there is unused).
+_RPY_SUMS = (
+    ((_W, _X), (_Y, _Z), 1.0),
+    ((_W, _Y), (_Z, _X), -1.0),
+    ((_W, _Z), (_X, _Y), 1.0),
+    ((_X, _X), (_Y, _Y), 1.0),
+    ((_X, _X), (_Y, _Y), 1.0),
+    ((_Y, _Y), (_Z, _Z), 1.0),
+)
+
+
+@functools.lru_cache(maxsize=8)
+def _rpy_terms(device: torch.device, dtype: torch.dtype) -> tuple[torch.Tensor, ...]:
+    """`_RPY_SUMS` as tensors: the products' left and right factors (all first products,
+    then all second ones), the signs, and the pitch column."""
+    products = [row[0] for row in _RPY_SUMS] + [row[1] for row in _RPY_SUMS]
+    with torch.inference_mode(False):  # usable in and out of inference mode
+        return (
+            torch.tensor([a for a, _ in products], device=device),
+            torch.tensor([b for _, b in products], device=device),
+            torch.tensor([row[2] for row in _RPY_SUMS], device=device, dtype=dtype),
+            torch.tensor([False, True, False], device=device),
+        )
 
 
 def yaw_from_quat(quat_wxyz: torch.Tensor) -> torch.Tensor:
@@ -114,30 +203,12 @@ def quat_rotate_inverse(quat_wxyz: torch.Tensor, vec: torch.Tensor) -> torch.Ten
 def state_from_arrays(
     qpos: torch.Tensor, qvel: torch.Tensor, sensordata: torch.Tensor, layout: SensorLayout
 ) -> RobotState:
-    """Build the state from MuJoCo's arrays (N, nq), (N, nv), (N, nsensordata).
+    """The state of MuJoCo's arrays (N, nq), (N, nv), (N, nsensordata).
 
     The free joint's qvel holds the linear velocity in the world frame and the angular
     velocity in the body frame (MuJoCo convention).
     """
-
-    def cols(idx: tuple[int, ...]) -> torch.Tensor:
-        return sensordata[:, _index(idx, sensordata.device)]
-
-    n = qpos.shape[0]
-    return RobotState(
-        base_pos_w=qpos[:, 0:3],
-        base_quat_w=qpos[:, 3:7],
-        base_lin_vel_w=qvel[:, 0:3],
-        base_ang_vel_b=qvel[:, 3:6],
-        joint_pos=qpos[:, 7:],
-        joint_vel=qvel[:, 6:],
-        joint_torque=cols(layout.joint_torque),
-        foot_pos_w=cols(layout.foot_pos).reshape(n, 4, 3),
-        foot_vel_w=cols(layout.foot_vel).reshape(n, 4, 3),
-        base_contact=sensordata[:, layout.base_contact] > 0.5,
-        leg_contacts=(cols(layout.leg_contact) > 0.5).sum(dim=1),
-        foot_radius_m=layout.foot_radius_m,
-    )
+    return RobotState(qpos, qvel, sensordata, layout)
 
 
 @functools.lru_cache(maxsize=64)
