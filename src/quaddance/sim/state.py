@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import mujoco
 import torch
@@ -124,9 +125,9 @@ class RobotState:
     @functools.cached_property
     def projected_gravity_b(self) -> torch.Tensor:
         """(N, 3) unit gravity direction in the body frame."""
-        gravity_w = torch.zeros_like(self.base_lin_vel_w)
-        gravity_w[:, 2] = -1.0
-        return quat_rotate_inverse(self.base_quat_w, gravity_w)
+        quat = self.base_quat_w
+        down = _rpy_consts(quat.device, quat.dtype).down
+        return quat_rotate_inverse(quat, down.expand(quat.shape[0], 3))
 
     @functools.cached_property
     def base_rpy_rad(self) -> torch.Tensor:
@@ -134,14 +135,14 @@ class RobotState:
         roll = atan2(2 (w x + y z), 1 - 2 (x x + y y)), pitch = asin(2 (w y - z x)) and
         yaw = atan2(2 (w z + x y), 1 - 2 (y y + z z)), all three in one pass."""
         quat = self.base_quat_w
-        left, right, sign, is_pitch = _rpy_terms(quat.device, quat.dtype)
-        # (N, 2, 6): the two products of each sum, column by column.
-        prod = (quat.index_select(1, left) * quat.index_select(1, right)).view(-1, 2, 6)
+        c = _rpy_consts(quat.device, quat.dtype)
+        # (N, 2, 6): the two products of each of `_RPY_SUMS`, column by column.
+        prod = (quat.index_select(1, c.left) * quat.index_select(1, c.right)).view(-1, 2, 6)
         first, second = prod.unbind(1)
-        sums = first + second * sign
-        twice = sums + sums  # 2 (w x + y z), 2 (w y - z x), 2 (w z + x y), 2 (x x + y y), ...
+        sums = first + second * c.sign
+        twice = sums + sums
         num, den = twice[:, 0:3], 1 - twice[:, 3:6]  # den's middle column is unused
-        return torch.where(is_pitch, num.clamp(-1.0, 1.0).asin(), torch.atan2(num, den))
+        return torch.where(c.is_pitch, num.clamp(-1.0, 1.0).asin(), torch.atan2(num, den))
 
     @property
     def base_yaw_rad(self) -> torch.Tensor:
@@ -167,17 +168,24 @@ _RPY_SUMS = (
 )
 
 
+class _RpyConsts(NamedTuple):
+    left: torch.Tensor  # the products' left factors: all first products, then all second
+    right: torch.Tensor
+    sign: torch.Tensor
+    is_pitch: torch.Tensor  # (3,) bool: the column read with asin
+    down: torch.Tensor  # (1, 3) gravity's direction in the world
+
+
 @functools.lru_cache(maxsize=8)
-def _rpy_terms(device: torch.device, dtype: torch.dtype) -> tuple[torch.Tensor, ...]:
-    """`_RPY_SUMS` as tensors: the products' left and right factors (all first products,
-    then all second ones), the signs, and the pitch column."""
+def _rpy_consts(device: torch.device, dtype: torch.dtype) -> _RpyConsts:
     products = [row[0] for row in _RPY_SUMS] + [row[1] for row in _RPY_SUMS]
     with torch.inference_mode(False):  # usable in and out of inference mode
-        return (
-            torch.tensor([a for a, _ in products], device=device),
-            torch.tensor([b for _, b in products], device=device),
-            torch.tensor([row[2] for row in _RPY_SUMS], device=device, dtype=dtype),
-            torch.tensor([False, True, False], device=device),
+        return _RpyConsts(
+            left=torch.tensor([a for a, _ in products], device=device),
+            right=torch.tensor([b for _, b in products], device=device),
+            sign=torch.tensor([row[2] for row in _RPY_SUMS], device=device, dtype=dtype),
+            is_pitch=torch.tensor([False, True, False], device=device),
+            down=torch.tensor([[0.0, 0.0, -1.0]], device=device, dtype=dtype),
         )
 
 
@@ -196,7 +204,8 @@ def quat_rotate_inverse(quat_wxyz: torch.Tensor, vec: torch.Tensor) -> torch.Ten
     """Rotate world vectors (N, 3) into the frame of unit quaternions (N, 4)."""
     w = quat_wxyz[:, :1]
     xyz = quat_wxyz[:, 1:]
-    t = 2.0 * torch.cross(xyz, vec, dim=1)
+    t = torch.cross(xyz, vec, dim=1)
+    t = t + t  # 2 (xyz x vec)
     return vec - w * t + torch.cross(xyz, t, dim=1)
 
 
