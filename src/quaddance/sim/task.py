@@ -150,6 +150,8 @@ class DanceEnv:
         self.prev_joint_vel = z(n, j)
         self._target_hist = self.nominal_joint_pos.repeat(n, 3, 1)  # joint targets t, t-1, t-2
         self.action_lag = torch.zeros(n, dtype=torch.long, device=dev)
+        d = cfg.decimation
+        self._lag_shift = d - 1 - torch.arange(d, device=dev)  # `_lagged_controls`' D - 1 - j
         self.joint_offset = z(n, j)
         self.dynamics = self._variants[torch.zeros(n, dtype=torch.long, device=dev)]
         self._last_proprio: torch.Tensor | None = None
@@ -239,11 +241,12 @@ class DanceEnv:
         The target applied at substep j of this step is the one computed ceil((lag - j) / D)
         policy steps ago (D = decimation), so a lag of 6 substeps is 30 ms.
         """
-        d = self.cfg.decimation
-        j = torch.arange(d, device=self.device)
-        back = torch.div(self.action_lag[:, None] - j[None, :] + d - 1, d, rounding_mode="floor")
+        lag = self.action_lag.unsqueeze(1) + self._lag_shift  # lag - j + D - 1, (N, D)
+        back = torch.div(lag, self.cfg.decimation, rounding_mode="floor")
         back = back.clamp(0, self._target_hist.shape[1] - 1)
-        return torch.gather(self._target_hist, 1, back[..., None].expand(-1, -1, self.num_actions))
+        return torch.gather(
+            self._target_hist, 1, back.unsqueeze(2).expand(-1, -1, self.num_actions)
+        )
 
     def measure(self) -> observations.Measurement:
         """What the robots' sensors read now (with sensor noise when randomising)."""

@@ -23,11 +23,17 @@ class TerminationTerm:
     time_out: bool = False
 
 
+@functools.lru_cache(maxsize=8)
+def _cos_f32(angle_rad: float) -> float:
+    """The float32 cosine, exactly as a float32 tensor compares with it; made once."""
+    return torch.cos(torch.tensor(angle_rad)).item()
+
+
 def fell(env: DanceEnv) -> torch.Tensor:
     """The trunk touches the floor, tilts past `max_tilt_rad`, or sinks below the minimum."""
     s = env.robot
-    cos_tilt = -s.projected_gravity_b[:, 2]
-    tilted = cos_tilt < torch.cos(torch.tensor(env.cfg.max_tilt_rad))
+    # Tilted: cos(tilt) = -gravity_z below cos(max_tilt_rad), i.e. gravity_z above its negative.
+    tilted = s.projected_gravity_b[:, 2] > -_cos_f32(env.cfg.max_tilt_rad)
     low = s.base_pos_w[:, 2] < env.cfg.min_base_height_m
     return s.base_contact | tilted | low
 
