@@ -87,7 +87,8 @@ class DanceController:
         )
         self.rows = torch.cat([self.rows, more], dim=0)
 
-    def _row(self, ahead_steps: int) -> torch.Tensor:
+    def target_row(self, ahead_steps: int) -> torch.Tensor:
+        """(1, 8) `targets_at` then `body_targets_at` of ``ahead_steps``."""
         k = self.step + ahead_steps
         if self._fade is not None:
             row, first, n = self._fade
@@ -98,16 +99,16 @@ class DanceController:
     def targets_at(self, ahead_steps: int) -> torch.Tensor:
         """(1, 4) paw targets ``ahead_steps`` ticks from the current step (held at the end;
         faded to `rest_row` after `fade_out`)."""
-        return self._row(ahead_steps)[:, PAWS]
+        return self.target_row(ahead_steps)[:, PAWS]
 
     def body_targets_at(self, ahead_steps: int) -> torch.Tensor:
         """(1, 4) body targets, as `targets_at`."""
-        return self._row(ahead_steps)[:, BODY]
+        return self.target_row(ahead_steps)[:, BODY]
 
     def fade_out(self, steps: int) -> None:
         """From the current step on, targets go linearly from their value now to `rest_row`
         over ``steps`` ticks, and stay there."""
-        self._fade = (self._row(0).clone(), self.step, max(1, steps))
+        self._fade = (self.target_row(0).clone(), self.step, max(1, steps))
 
     def measurement(self, reading: Reading) -> Measurement:
         """The reading as the actor's `Measurement`, its heading relative to the dance's start."""

@@ -260,8 +260,7 @@ def _play(
         robot = env.robot
         qpos[t] = env.engine.read().qpos.numpy()[0]
         feet[t] = robot.foot_height_m.numpy()[0]
-        targets[t] = env.targets_at(0).numpy()[0]
-        body_targets[t] = env.body_targets_at(0).numpy()[0]
+        targets[t], body_targets[t] = np.split(env.target_row(0).numpy()[0], 2)
         base_height[t] = robot.base_pos_w.numpy()[0, 2]
         base_rpy[t] = robot.base_rpy_rad.numpy()[0]
         if on_pose is not None:

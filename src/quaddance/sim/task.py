@@ -50,9 +50,9 @@ class JointTargetSource(Protocol):
     feedforward: FrontLiftFeedforward | None
     body_feedforward: BodyFeedforward | None
 
-    def targets_at(self, ahead_steps: int) -> torch.Tensor: ...
-
-    def body_targets_at(self, ahead_steps: int) -> torch.Tensor: ...
+    def target_row(self, ahead_steps: int) -> torch.Tensor:
+        """(N, 8) the paw then the body targets ``ahead_steps`` policy steps from now."""
+        ...
 
 
 def joint_targets(actions: torch.Tensor, src: JointTargetSource) -> torch.Tensor:
@@ -61,10 +61,13 @@ def joint_targets(actions: torch.Tensor, src: JointTargetSource) -> torch.Tensor
     contract written into the policy's JSON). Training and the robot runner (deploy/) both
     call this."""
     target = src.nominal_joint_pos + src.action_scale * actions
+    if src.feedforward is None and src.body_feedforward is None:
+        return target
+    row = src.target_row(1)
     if src.feedforward is not None:
-        target = target + src.feedforward(src.targets_at(1)[:, FRONT_PAWS])
+        target = target + src.feedforward(row[:, FRONT_PAWS])
     if src.body_feedforward is not None:
-        target = target + src.body_feedforward(src.body_targets_at(1))
+        target = target + src.body_feedforward(row[:, BODY])
     return target
 
 
@@ -155,6 +158,7 @@ class DanceEnv:
         self.joint_offset = z(n, j)
         self.dynamics = self._variants[torch.zeros(n, dtype=torch.long, device=dev)]
         self._last_proprio: torch.Tensor | None = None
+        self._ahead: dict[tuple[int, ...], torch.Tensor] = {}  # `_bank_rows`' step offsets
         self.robot: RobotState = self._read_state()
         self.errors = rewards.TrackingErrors(self)
         self.fell = torch.zeros(n, dtype=torch.bool, device=dev)
@@ -168,37 +172,53 @@ class DanceEnv:
         self.reset_all()
 
     # --- targets ---------------------------------------------------------------------------
-    def _bank_at(self, ahead_steps: int) -> torch.Tensor:
-        t = (self.bank_offset + self.episode_length_buf + ahead_steps).clamp(
-            max=self.bank.shape[1] - 1
-        )
-        return self.bank[self.bank_idx, t]
+    def _bank_rows(self, *ahead_steps: int) -> torch.Tensor:
+        """(N, K, 8) the bank's rows [paws | body] at each of the K ``ahead_steps`` policy
+        steps from now (held at the sequence's end), the body scaled by the curriculum: one
+        lookup for them all."""
+        ahead = self._ahead.get(ahead_steps)
+        if ahead is None:
+            with torch.inference_mode(False):  # usable in and out of inference mode
+                ahead = torch.tensor(ahead_steps, device=self.device)
+            self._ahead[ahead_steps] = ahead
+        t = (self.bank_offset + self.episode_length_buf).unsqueeze(1) + ahead
+        rows = self.bank[self.bank_idx.unsqueeze(1), t.clamp(max=self.bank.shape[1] - 1)]
+        if self.curriculum_scale == 1.0:
+            return rows
+        return torch.cat([rows[..., PAWS], rows[..., BODY] * self.curriculum_scale], dim=2)
+
+    def target_row(self, ahead_steps: int) -> torch.Tensor:
+        """(N, 8) `targets_at` then `body_targets_at` of ``ahead_steps``, in one lookup."""
+        return self._bank_rows(ahead_steps)[:, 0]
 
     def targets_at(self, ahead_steps: int) -> torch.Tensor:
         """(N, 4) paw targets `ahead_steps` policy steps from now (held at the sequence's end)."""
-        return self._bank_at(ahead_steps)[:, PAWS]
+        return self.target_row(ahead_steps)[:, PAWS]
 
     def body_targets_at(self, ahead_steps: int) -> torch.Tensor:
         """(N, 4) body targets (height offset m, roll, pitch, yaw rad) `ahead_steps` from now;
         zeros for a paws-only dance."""
-        body = self._bank_at(ahead_steps)[:, BODY]
-        return body if self.curriculum_scale == 1.0 else body * self.curriculum_scale
+        return self.target_row(ahead_steps)[:, BODY]
 
     # --- VecEnv interface ----------------------------------------------------------------------
     def get_observations(self):
-        """Observation groups "actor" and "critic": a TensorDict when training (rsl-rl),
-        a dict of (N, k) tensors in playback."""
+        """Observation groups "actor" and "critic": a TensorDict when training (rsl-rl).
+        In playback (no rewards) a dict of (N, k) tensors, "actor" only: no one reads the
+        critic's there."""
         prop = self._proprio()
         self._last_proprio = prop  # the next step's history frame
-        actor = self.actor_obs.build(prop, self.targets_at, self.body_targets_at)
+        # Every target row the observation reads, looked up at once.
+        steps = (0, *self.preview_steps)
+        rows = dict(zip(steps, self._bank_rows(*steps).unbind(1), strict=True))
+        actor = self.actor_obs.build(prop, lambda k: rows[k][:, PAWS], lambda k: rows[k][:, BODY])
         groups = {"actor": actor}
+        if not self.compute_rewards:
+            return groups
         if self.cfg.obs.privileged_critic:
             privileged = [t.fn(self) for t in observations.PRIVILEGED_TERMS]
             groups["critic"] = torch.cat([actor, *privileged], dim=1)
         else:
             groups["critic"] = actor
-        if not self.compute_rewards:
-            return groups
         from tensordict import TensorDict
 
         return TensorDict(groups, batch_size=[self.num_envs], device=self.device)
