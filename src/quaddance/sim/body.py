@@ -17,7 +17,6 @@ import torch
 from quaddance.robots import RobotCfg
 from quaddance.sim.kinematics import LegGeometry, foot_pos_b, leg_geometry
 
-
 #: `rpy_matrix`'s nine entries, each ``a * b * c + sign * (d * e)`` over the table
 #: [cos r, cos p, cos y, 1, sin r, sin p, sin y, 0] (indices below): R = R_z R_y R_x.
 _CR, _CP, _CY, _ONE, _SR, _SP, _SY, _ZERO = range(8)

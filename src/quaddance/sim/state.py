@@ -120,7 +120,7 @@ class RobotState:
     @functools.cached_property
     def foot_height_m(self) -> torch.Tensor:
         """(N, 4) height of each foot's bottom above the floor: THE foot height of quaddance."""
-        return self.foot_pos_w[..., 2] - self.foot_radius_m
+        return self._sensors(self._layout.foot_pos[2::3]) - self.foot_radius_m
 
     @functools.cached_property
     def projected_gravity_b(self) -> torch.Tensor:
@@ -141,7 +141,7 @@ class RobotState:
         first, second = prod.unbind(1)
         sums = first + second * c.sign
         twice = sums + sums
-        num, den = twice[:, 0:3], 1 - twice[:, 3:6]  # den's middle column is unused
+        num, den = twice[:, 0:3], c.one - twice[:, 3:6]  # den's middle column is unused
         return torch.where(c.is_pitch, num.clamp(-1.0, 1.0).asin(), torch.atan2(num, den))
 
     @property
@@ -174,6 +174,7 @@ class _RpyConsts(NamedTuple):
     sign: torch.Tensor
     is_pitch: torch.Tensor  # (3,) bool: the column read with asin
     down: torch.Tensor  # (1, 3) gravity's direction in the world
+    one: torch.Tensor  # () 1: a tensor, as no number is wrapped per call
 
 
 @functools.lru_cache(maxsize=8)
@@ -186,6 +187,7 @@ def _rpy_consts(device: torch.device, dtype: torch.dtype) -> _RpyConsts:
             sign=torch.tensor([row[2] for row in _RPY_SUMS], device=device, dtype=dtype),
             is_pitch=torch.tensor([False, True, False], device=device),
             down=torch.tensor([[0.0, 0.0, -1.0]], device=device, dtype=dtype),
+            one=torch.tensor(1.0, device=device, dtype=dtype),
         )
 
 
@@ -197,7 +199,17 @@ def yaw_from_quat(quat_wxyz: torch.Tensor) -> torch.Tensor:
 
 def wrap_angle_rad(angle: torch.Tensor) -> torch.Tensor:
     """Angles wrapped to [-pi, pi)."""
-    return torch.remainder(angle + torch.pi, 2 * torch.pi) - torch.pi
+    pi, two_pi = _pi(angle.device, angle.dtype)  # tensors: no number wrapped per call
+    return torch.remainder(angle + pi, two_pi) - pi
+
+
+@functools.lru_cache(maxsize=8)
+def _pi(device: torch.device, dtype: torch.dtype) -> tuple[torch.Tensor, torch.Tensor]:
+    with torch.inference_mode(False):  # usable in and out of inference mode
+        return (
+            torch.tensor(torch.pi, device=device, dtype=dtype),
+            torch.tensor(2 * torch.pi, device=device, dtype=dtype),
+        )
 
 
 def quat_rotate_inverse(quat_wxyz: torch.Tensor, vec: torch.Tensor) -> torch.Tensor:

@@ -209,8 +209,10 @@ class DanceEnv:
         self._last_proprio = prop  # the next step's history frame
         # Every target row the observation reads, looked up at once.
         steps = (0, *self.preview_steps)
-        rows = dict(zip(steps, self._bank_rows(*steps).unbind(1), strict=True))
-        actor = self.actor_obs.build(prop, lambda k: rows[k][:, PAWS], lambda k: rows[k][:, BODY])
+        rows = self._bank_rows(*steps)
+        paws = dict(zip(steps, rows[..., PAWS].unbind(1), strict=True))
+        body = dict(zip(steps, rows[..., BODY].unbind(1), strict=True))
+        actor = self.actor_obs.build(prop, paws.__getitem__, body.__getitem__)
         groups = {"actor": actor}
         if not self.compute_rewards:
             return groups
