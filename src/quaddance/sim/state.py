@@ -7,13 +7,16 @@ the same function, so the task cannot tell which engine ran the physics.
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, Generic, NamedTuple, TypeVar
 
 import mujoco
 import torch
 
 from quaddance.robots import RobotCfg
+
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -46,6 +49,22 @@ class SensorLayout:
         )
 
 
+class _once(Generic[T]):  # noqa: N801 - a decorator, as functools.cached_property
+    """`functools.cached_property` without its lock (Python 3.11 takes it at every first
+    read, a dozen times per policy step): the value computed at the first read is stored on
+    the instance, where later reads find it."""
+
+    def __init__(self, fn: Callable[[Any], T]) -> None:
+        self.fn, self.name = fn, fn.__name__
+        self.__doc__ = fn.__doc__
+
+    def __get__(self, obj: Any, cls: type | None = None) -> T:
+        if obj is None:
+            return self  # type: ignore[return-value]  # read on the class: the descriptor
+        value = obj.__dict__[self.name] = self.fn(obj)
+        return value
+
+
 class RobotState:
     """Batched robot state; N environments, world frame `_w`, body frame `_b`.
 
@@ -62,74 +81,76 @@ class RobotState:
     def _sensors(self, idx: tuple[int, ...]) -> torch.Tensor:
         return self._sensordata.index_select(1, _index(idx, self._sensordata.device))
 
-    @functools.cached_property
+    @_once
     def base_pos_w(self) -> torch.Tensor:
         """(N, 3) m."""
         return self._qpos[:, 0:3]
 
-    @functools.cached_property
+    @_once
     def base_quat_w(self) -> torch.Tensor:
         """(N, 4) w, x, y, z."""
         return self._qpos[:, 3:7]
 
-    @functools.cached_property
+    @_once
     def base_lin_vel_w(self) -> torch.Tensor:
         """(N, 3) m/s."""
         return self._qvel[:, 0:3]
 
-    @functools.cached_property
+    @_once
     def base_ang_vel_b(self) -> torch.Tensor:
         """(N, 3) rad/s (MuJoCo's free joint has its angular velocity in the body frame)."""
         return self._qvel[:, 3:6]
 
-    @functools.cached_property
+    @_once
     def joint_pos(self) -> torch.Tensor:
         """(N, 12) rad, model joint order."""
         return self._qpos[:, 7:]
 
-    @functools.cached_property
+    @_once
     def joint_vel(self) -> torch.Tensor:
         """(N, 12) rad/s."""
         return self._qvel[:, 6:]
 
-    @functools.cached_property
+    @_once
     def joint_torque(self) -> torch.Tensor:
         """(N, 12) N m."""
         return self._sensors(self._layout.joint_torque)
 
-    @functools.cached_property
+    @_once
     def foot_pos_w(self) -> torch.Tensor:
         """(N, 4, 3) m, foot sphere centres, task foot order."""
         return self._sensors(self._layout.foot_pos).view(-1, 4, 3)
 
-    @functools.cached_property
+    @_once
     def foot_vel_w(self) -> torch.Tensor:
         """(N, 4, 3) m/s."""
         return self._sensors(self._layout.foot_vel).view(-1, 4, 3)
 
-    @functools.cached_property
+    @_once
     def base_contact(self) -> torch.Tensor:
         """(N,) bool: the trunk touches the floor."""
-        return self._sensordata[:, self._layout.base_contact] > 0.5
+        contacts = self._sensordata[:, self._layout.base_contact]
+        return contacts > scalar_tensor(0.5, contacts)
 
-    @functools.cached_property
+    @_once
     def leg_contacts(self) -> torch.Tensor:
         """(N,) number of thighs/calves touching the floor."""
         return (self._sensors(self._layout.leg_contact) > 0.5).sum(dim=1)
 
-    @functools.cached_property
+    @_once
     def foot_height_m(self) -> torch.Tensor:
         """(N, 4) height of each foot's bottom above the floor: THE foot height of quaddance."""
-        return self._sensors(self._layout.foot_pos[2::3]) - self.foot_radius_m
+        z = self._sensors(self._layout.foot_pos[2::3])
+        return z - scalar_tensor(self.foot_radius_m, z)
 
-    @functools.cached_property
+    @_once
     def projected_gravity_b(self) -> torch.Tensor:
         """(N, 3) unit gravity direction in the body frame."""
         quat = self.base_quat_w
         down = _rpy_consts(quat.device, quat.dtype).down
         return quat_rotate_inverse(quat, down.expand(quat.shape[0], 3))
 
-    @functools.cached_property
+    @_once
     def base_rpy_rad(self) -> torch.Tensor:
         """(N, 3) roll, pitch, yaw of the trunk (extrinsic x-y-z, as `sim.body.rpy_matrix`):
         roll = atan2(2 (w x + y z), 1 - 2 (x x + y y)), pitch = asin(2 (w y - z x)) and
@@ -141,7 +162,7 @@ class RobotState:
         first, second = prod.unbind(1)
         sums = first + second * c.sign
         twice = sums + sums
-        num, den = twice[:, 0:3], c.one - twice[:, 3:6]  # den's middle column is unused
+        num, den = twice[:, 0:3], scalar_tensor(1.0, twice) - twice[:, 3:6]  # [1]: unused
         return torch.where(c.is_pitch, num.clamp(-1.0, 1.0).asin(), torch.atan2(num, den))
 
     @property
@@ -149,7 +170,7 @@ class RobotState:
         """(N,) heading of the trunk about the world vertical, rad."""
         return self.base_rpy_rad[:, 2]
 
-    @functools.cached_property
+    @_once
     def base_lin_vel_b(self) -> torch.Tensor:
         return quat_rotate_inverse(self.base_quat_w, self.base_lin_vel_w)
 
@@ -174,7 +195,6 @@ class _RpyConsts(NamedTuple):
     sign: torch.Tensor
     is_pitch: torch.Tensor  # (3,) bool: the column read with asin
     down: torch.Tensor  # (1, 3) gravity's direction in the world
-    one: torch.Tensor  # () 1: a tensor, as no number is wrapped per call
 
 
 @functools.lru_cache(maxsize=8)
@@ -187,7 +207,6 @@ def _rpy_consts(device: torch.device, dtype: torch.dtype) -> _RpyConsts:
             sign=torch.tensor([row[2] for row in _RPY_SUMS], device=device, dtype=dtype),
             is_pitch=torch.tensor([False, True, False], device=device),
             down=torch.tensor([[0.0, 0.0, -1.0]], device=device, dtype=dtype),
-            one=torch.tensor(1.0, device=device, dtype=dtype),
         )
 
 
@@ -199,17 +218,20 @@ def yaw_from_quat(quat_wxyz: torch.Tensor) -> torch.Tensor:
 
 def wrap_angle_rad(angle: torch.Tensor) -> torch.Tensor:
     """Angles wrapped to [-pi, pi)."""
-    pi, two_pi = _pi(angle.device, angle.dtype)  # tensors: no number wrapped per call
-    return torch.remainder(angle + pi, two_pi) - pi
+    pi = scalar_tensor(torch.pi, angle)
+    return torch.remainder(angle + pi, scalar_tensor(2 * torch.pi, angle)) - pi
 
 
-@functools.lru_cache(maxsize=8)
-def _pi(device: torch.device, dtype: torch.dtype) -> tuple[torch.Tensor, torch.Tensor]:
+def scalar_tensor(value: float, like: torch.Tensor) -> torch.Tensor:
+    """``value`` as a 0-dim tensor of ``like``'s dtype and device, made once: an operator
+    given a Python number wraps it into a new tensor at every call (a few us at batch 1)."""
+    return _scalar_tensor(value, like.dtype, like.device)
+
+
+@functools.lru_cache(maxsize=64)
+def _scalar_tensor(value: float, dtype: torch.dtype, device: torch.device) -> torch.Tensor:
     with torch.inference_mode(False):  # usable in and out of inference mode
-        return (
-            torch.tensor(torch.pi, device=device, dtype=dtype),
-            torch.tensor(2 * torch.pi, device=device, dtype=dtype),
-        )
+        return torch.tensor(value, dtype=dtype, device=device)
 
 
 def quat_rotate_inverse(quat_wxyz: torch.Tensor, vec: torch.Tensor) -> torch.Tensor:

@@ -10,6 +10,8 @@ from typing import TYPE_CHECKING
 
 import torch
 
+from quaddance.sim.state import scalar_tensor
+
 if TYPE_CHECKING:
     from quaddance.sim.task import DanceEnv
 
@@ -33,8 +35,9 @@ def fell(env: DanceEnv) -> torch.Tensor:
     """The trunk touches the floor, tilts past `max_tilt_rad`, or sinks below the minimum."""
     s = env.robot
     # Tilted: cos(tilt) = -gravity_z below cos(max_tilt_rad), i.e. gravity_z above its negative.
-    tilted = s.projected_gravity_b[:, 2] > -_cos_f32(env.cfg.max_tilt_rad)
-    low = s.base_pos_w[:, 2] < env.cfg.min_base_height_m
+    gravity_z, height_m = s.projected_gravity_b[:, 2], s.base_pos_w[:, 2]
+    tilted = gravity_z > scalar_tensor(-_cos_f32(env.cfg.max_tilt_rad), gravity_z)
+    low = height_m < scalar_tensor(env.cfg.min_base_height_m, height_m)
     return s.base_contact | tilted | low
 
 
