@@ -65,6 +65,23 @@ class _once(Generic[T]):  # noqa: N801 - a decorator, as functools.cached_proper
         return value
 
 
+class _view:  # noqa: N801 - a field of RobotState, as `_once`
+    """A quantity that is a range of columns of one of the state's arrays (a view, made at
+    its first read)."""
+
+    def __init__(self, array: str, start: int, stop: int | None, doc: str) -> None:
+        self.array, self.cols, self.__doc__ = array, slice(start, stop), doc
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    def __get__(self, obj: Any, cls: type | None = None) -> torch.Tensor:
+        if obj is None:
+            return self  # type: ignore[return-value]  # read on the class: the descriptor
+        value = obj.__dict__[self.name] = getattr(obj, self.array)[:, self.cols]
+        return value
+
+
 class RobotState:
     """Batched robot state; N environments, world frame `_w`, body frame `_b`.
 
@@ -81,35 +98,12 @@ class RobotState:
     def _sensors(self, idx: tuple[int, ...]) -> torch.Tensor:
         return self._sensordata.index_select(1, _index(idx, self._sensordata.device))
 
-    @_once
-    def base_pos_w(self) -> torch.Tensor:
-        """(N, 3) m."""
-        return self._qpos[:, 0:3]
-
-    @_once
-    def base_quat_w(self) -> torch.Tensor:
-        """(N, 4) w, x, y, z."""
-        return self._qpos[:, 3:7]
-
-    @_once
-    def base_lin_vel_w(self) -> torch.Tensor:
-        """(N, 3) m/s."""
-        return self._qvel[:, 0:3]
-
-    @_once
-    def base_ang_vel_b(self) -> torch.Tensor:
-        """(N, 3) rad/s (MuJoCo's free joint has its angular velocity in the body frame)."""
-        return self._qvel[:, 3:6]
-
-    @_once
-    def joint_pos(self) -> torch.Tensor:
-        """(N, 12) rad, model joint order."""
-        return self._qpos[:, 7:]
-
-    @_once
-    def joint_vel(self) -> torch.Tensor:
-        """(N, 12) rad/s."""
-        return self._qvel[:, 6:]
+    base_pos_w = _view("_qpos", 0, 3, "(N, 3) m.")
+    base_quat_w = _view("_qpos", 3, 7, "(N, 4) w, x, y, z.")
+    base_lin_vel_w = _view("_qvel", 0, 3, "(N, 3) m/s.")
+    base_ang_vel_b = _view("_qvel", 3, 6, "(N, 3) rad/s (MuJoCo: the free joint's, body frame).")
+    joint_pos = _view("_qpos", 7, None, "(N, 12) rad, model joint order.")
+    joint_vel = _view("_qvel", 6, None, "(N, 12) rad/s.")
 
     @_once
     def joint_torque(self) -> torch.Tensor:
