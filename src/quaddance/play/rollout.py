@@ -19,6 +19,7 @@ import torch
 
 from quaddance.dancefile import Dance
 from quaddance.errors import QuaddanceError
+from quaddance.layout import BODY, PAWS
 from quaddance.play.policy import OnnxPolicy
 
 
@@ -260,7 +261,8 @@ def _play(
         robot = env.robot
         qpos[t] = env.engine.read().qpos.numpy()[0]
         feet[t] = robot.foot_height_m.numpy()[0]
-        targets[t], body_targets[t] = np.split(env.target_row(0).numpy()[0], 2)
+        row = env.target_row(0).numpy()[0]
+        targets[t], body_targets[t] = row[PAWS], row[BODY]
         base_height[t] = robot.base_pos_w.numpy()[0, 2]
         base_rpy[t] = robot.base_rpy_rad.numpy()[0]
         if on_pose is not None:
