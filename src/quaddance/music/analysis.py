@@ -39,6 +39,11 @@ import numpy as np
 from quaddance.errors import InputFileError
 from quaddance.layout import BEATS_PER_BAR
 
+MIN_BEAT_GAP_S = 0.2
+"""Beats are at least this far apart, seconds (300 BPM, above any dance tempo): the offline
+analyser and the online tracker (`music.online_beats`) drop a beat that would come sooner
+after the one before, so their beats always increase."""
+
 
 @dataclass(frozen=True)
 class AnalysisConfig:
@@ -112,8 +117,10 @@ class Analysis:
 
     Attributes:
         tempo_bpm: main tempo, beats per minute.
-        beats_s: (n_beats,) beat times, seconds.
-        downbeats_s: (n_bars,) times of beat 1 of each bar (4/4 assumed), seconds.
+        beats_s: (n_beats,) beat times, seconds, each at least `MIN_BEAT_GAP_S` after the
+            one before.
+        downbeats_s: (n_bars,) times of beat 1 of each bar (4/4 assumed), seconds: every
+            fourth of ``beats_s``.
         onset_env: (n_frames,) onset strength, scaled to a maximum of 1, at ``env_fps``.
         rms_env: (n_frames,) loudness as linear RMS amplitude (full scale = 1), at ``env_fps``.
         env_fps: frame rate of both envelopes, frames per second (``sr / hop_length``).
@@ -544,7 +551,9 @@ def backbeat_heard(hits: np.ndarray, cfg: AnalysisConfig) -> bool:
 
 
 def _refine(beats: np.ndarray, onset: np.ndarray, radius: int = 1) -> np.ndarray:
-    """Sub-frame beat positions: parabolic peak of the onset envelope near each beat frame."""
+    """Sub-frame beat positions: the highest onset frame within ``radius`` of each beat frame,
+    moved to the vertex of the parabola through it and its neighbours where it is a peak (the
+    vertex then lies within half a frame; on a slope it can lie anywhere, past the next beat)."""
     out = beats.astype(float)
     n = len(onset)
     for i, b in enumerate(beats):
@@ -554,9 +563,20 @@ def _refine(beats: np.ndarray, onset: np.ndarray, radius: int = 1) -> np.ndarray
         if 0 < j < n - 1:
             y0, y1, y2 = onset[j - 1], onset[j], onset[j + 1]
             denom = y0 - 2 * y1 + y2
-            if denom < 0:
+            if y1 >= max(y0, y2) and denom < 0:
                 out[i] = j + 0.5 * (y0 - y2) / denom
     return out
+
+
+def _spaced(times_s: np.ndarray) -> np.ndarray:
+    """(n,) mask of the ``times_s`` kept so that each comes at least `MIN_BEAT_GAP_S` after the
+    last one kept (the first is kept): strictly increasing, whatever their order."""
+    keep = np.zeros(len(times_s), dtype=bool)
+    last_s = -np.inf
+    for i, t in enumerate(times_s):
+        if t >= last_s + MIN_BEAT_GAP_S:
+            keep[i], last_s = True, t
+    return keep
 
 
 def _downbeat_phase(beat_frames: np.ndarray, feats: _Features) -> int:
@@ -681,8 +701,9 @@ def analyze(y: np.ndarray, sr: int, cfg: AnalysisConfig | None = None) -> Analys
     if backbeat_double:
         midpoints = np.round(0.5 * (beat_frames[1:] + beat_frames[:-1])).astype(int)
         beat_frames = np.sort(np.concatenate([beat_frames, midpoints]))
-    beat_pos = _refine(beat_frames, feats.beat_onset)
-    beats_s = beat_pos / fps
+    beats_s = _refine(beat_frames, feats.beat_onset) / fps
+    keep = _spaced(beats_s)
+    beat_frames, beats_s = beat_frames[keep], beats_s[keep]
     phase = _downbeat_phase(beat_frames, feats)
     downbeat_frames = beat_frames[phase::BEATS_PER_BAR]
     section_frames = _sections(downbeat_frames, feats, cfg)
