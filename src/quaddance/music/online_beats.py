@@ -94,6 +94,7 @@ import numpy as np
 
 from quaddance.layout import BEATS_PER_BAR
 from quaddance.music.analysis import (
+    MIN_BEAT_GAP_S,
     SWING_FRACTIONS,
     AnalysisConfig,
     autocorrelation,
@@ -609,6 +610,7 @@ class OnlineBeatTracker:
         self._first_trusted = song_start
         self._followed = self._first if song_start else self._joined
         self._lock_s = float("nan")
+        self._last_beat_s = -np.inf  # the last beat returned, by either listener
 
     def update(self, block: np.ndarray, t_end_s: float) -> list[BeatEvent]:
         """Process the next audio block; return the beats whose time the audio has reached.
@@ -618,7 +620,8 @@ class OnlineBeatTracker:
             t_end_s: song time of the end of the block, seconds.
 
         Returns:
-            The beats with ``time_s <= t_end_s`` not reported before, in time order.
+            The beats with ``time_s <= t_end_s`` not reported before, each at least
+            `MIN_BEAT_GAP_S` after the one before (a beat sooner is dropped).
         """
         spectra = self._feats.push(np.asarray(block, dtype=np.float32).reshape(-1))
         # Samples short of a whole frame wait in ``pending``: the newest frame ends before them.
@@ -635,7 +638,18 @@ class OnlineBeatTracker:
             self._followed = self._joined
         if self._followed.locked and not np.isfinite(self._lock_s):
             self._lock_s = t_end_s
-        return first if self._followed is self._first else joined
+        # A beat can come sooner than `MIN_BEAT_GAP_S` after the last one returned, or before
+        # it: a held grid's beats are scheduled up to a period or more ahead (its offset grows
+        # past a beat), and when the offset is dropped (a lost lock, a new tempo) the score's
+        # next beat comes before or just after them; or the listener followed has changed.
+        # Such a beat is dropped, not reported out of order (its listener has counted it, so
+        # the bar position stays on the grid).
+        beats = []
+        for beat in first if self._followed is self._first else joined:
+            if beat.time_s >= self._last_beat_s + MIN_BEAT_GAP_S:
+                beats.append(beat)
+                self._last_beat_s = beat.time_s
+        return beats
 
     @property
     def state(self) -> TrackerState:
