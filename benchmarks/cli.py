@@ -299,11 +299,16 @@ def bench_dance_cmd(
     repeats: Annotated[int, typer.Option(help="Timed runs per song (median and min).")] = 3,
     warmup: Annotated[bool, typer.Option(help="One untimed run first.")] = True,
     policy: Annotated[Path | None, typer.Option(help="Policy .onnx; default: shipped.")] = None,
+    no_video: Annotated[
+        bool,
+        typer.Option("--no-video", help="Time `dance --no-video`: the simulation's speed."),
+    ] = False,
 ) -> None:
-    """Time the whole `dance` command (video on) on a 12 s and a 30 s song; writes JSON.
+    """Time the whole `dance` command on a 12 s and a 30 s song; writes JSON.
 
-    Each run is a fresh process timed from outside; ratio = wall / song length (goal <= 1).
-    CPU time of the process tree and the load average are recorded beside the wall time.
+    Each run is a fresh process timed from outside; ratio = wall / song length (goal <= 1
+    with video). CPU time of the process tree, the load average and metrics.json's
+    `realtime_factor_sim` are recorded beside the wall time.
     """
     from rich.console import Console
 
@@ -311,14 +316,20 @@ def bench_dance_cmd(
 
     console = Console(stderr=True)
     results = run_dance_bench(
-        out, repeats=repeats, warmup=warmup, policy=policy, progress=console.log
+        out,
+        repeats=repeats,
+        warmup=warmup,
+        policy=policy,
+        progress=console.log,
+        video=not no_video,
     )
     for song in results["songs"]:
         print(
             f"{song['song_s']:g} s song: wall median {song['wall_median_s']:.1f} s "
             f"({song['ratio_median']:.2f}x), min {song['wall_min_s']:.1f} s "
             f"({song['ratio_min']:.2f}x); CPU {song['cpu_median_s']:.1f} s; "
-            f"load {song['load_1min_median']:.1f}"
+            f"load {song['load_1min_median']:.1f}; "
+            f"sim {song['realtime_factor_sim_median']:.1f}x real time"
         )
     print(f"-> {out}")
 
