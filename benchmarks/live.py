@@ -159,8 +159,8 @@ HELDOUT_SYNTH_SONGS: tuple[tuple[str, tuple[dict[str, Any], ...], float], ...] =
 )
 
 
-#: Songs added to the ``tuning`` set of this benchmark only (not ``bench beats``') in session 22,
-#: for the online tracker: the untuned set's kinds of song (drums or keys that do not mark the
+#: Songs of the ``tuning`` set of this benchmark only (not ``bench beats``'), for the online
+#: tracker: the untuned set's kinds of song (drums or keys that do not mark the
 #: beat, a slow swung half-time feel, a ramp in a syncopated groove) at other tempi, with other
 #: chord and bass rhythms and seeds, so that those kinds can be tuned on without tuning on the
 #: untuned set's songs themselves. The last six were first a validation set that chose between
@@ -662,14 +662,13 @@ def bench_live_tracker(
             "songs_locked_in_time": in_time("lock_s"),
             "songs_within_f_gap": in_gap("f_diff"),
             # The same goals for the songs joined mid-song (`join_mid_song`): music already
-            # playing, as in a room, heard by a tracker told so (``song_start=False``, since
-            # session 26). Measured since session 24; issue 11 states its goals for the songs
-            # from their start.
+            # playing, as in a room, heard by a tracker told so (``song_start=False``); issue
+            # 11 states its goals for the songs from their start.
             "joining_mid_song": {
                 "songs_locked_in_time": in_time("join_lock_s"),
                 "songs_within_f_gap": in_gap("join_f_diff"),
             },
-            # Since session 26, lock only: a microphone that heard a quiet room first
+            # Lock only: a microphone that heard a quiet room first
             # (`MIC_LEAD_S`, from the song's start), and pink noise `NOISY_SNR_DB` below.
             "after_silence_locked_in_time": in_time("silence_lock_s"),
             "with_noise_locked_in_time": in_time("noisy_lock_s"),
