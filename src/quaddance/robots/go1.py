@@ -66,8 +66,11 @@ GO1 = RobotCfg(
     # the margin is for balancing dynamically on the beat. A policy declares the range it
     # was trained on in its JSON, and `quaddance dance` uses that instead.
     max_paw_height_m=0.30,
-    # PROVISIONAL: estimates, not measured. To be replaced by the ranges that
-    # `quaddance bench body-reach` measures in the simulator (four feet down / one paw up).
+    # Inside the trunk range the shipped policy holds (`quaddance bench body-reach --policy
+    # P`, benchmarks/results/body_reach.json): four feet down, height -10..+8 cm, roll
+    # +-0.5, pitch -0.15..+0.35, yaw +-0.35 rad; front-left paw 15 cm up, height -6..+9 cm,
+    # roll +-0.5, pitch -0.35..+0.4, yaw +-0.5 rad. One bound goes past it: four feet down,
+    # a nose-up pitch of -0.20 rad is reached but a foot slides 13 cm (-0.15 rad held).
     body_four_feet=BodyLimits(
         height_offset_m=(-0.06, 0.03), roll_rad=0.25, pitch_rad=0.20, yaw_rad=0.25
     ),
