@@ -62,13 +62,13 @@ def _songs(tmp: Path, seconds: float) -> list[tuple[str, Path]]:
 def _compare(policy, song: Path, seconds: float, log) -> tuple[dict, np.ndarray]:
     """The song's first ``seconds`` by `dance` and by `deploy --robot sim`."""
     from quaddance.pipeline import DanceSpec, make_dance
-    from quaddance.play.dance import spec_for_policy, target_config_for
+    from quaddance.play.dance import feasible_max_height_m, spec_for_policy
     from quaddance.play.metrics import feasible_mask, tracking_metrics
     from quaddance.play.rollout import rollout
 
     dance, _ = make_dance(song, None, spec_for_policy(DanceSpec(), policy))
     n = min(dance.targets_m.shape[0], round(seconds * policy.task.policy_hz))
-    feasible_max = target_config_for(policy, "feasible").max_height_m
+    feasible_max = feasible_max_height_m(policy)
     played = rollout(dance, policy)
     tgt, feet = played.targets_m[:n], played.feet_m[:n]
     front = tracking_metrics(tgt, feet, feasible_mask(tgt, feasible_max))

@@ -28,7 +28,8 @@ from quaddance.deploy.robot import JointCommand, Reading
 from quaddance.deploy.runner import DeployOptions, Runner
 from quaddance.deploy.states import DeployState
 from quaddance.errors import QuaddanceError
-from quaddance.play.dance import spec_for_policy, target_config_for
+from quaddance.pipeline import DanceSpec
+from quaddance.play.dance import spec_for_policy
 from quaddance.play.policy import OnnxPolicy, shipped_policy_path
 from quaddance.robots import GO1
 
@@ -79,7 +80,7 @@ def dance_targets(policy: OnnxPolicy, seconds: float, seed: int = 3) -> np.ndarr
     """(T, 4) feasible targets from a synthetic song (no audio analysis: fast)."""
     from quaddance.pipeline import target_bank
 
-    cfg = target_config_for(policy, "feasible")
+    cfg = spec_for_policy(DanceSpec(), policy).targets  # feasible, in the policy's range
     return target_bank(1, seconds, seed=seed, cfg=cfg)[0].astype(np.float64)
 
 

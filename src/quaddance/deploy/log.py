@@ -143,7 +143,7 @@ def summarize(
 ) -> DeployResult:
     """deploy.json's summary and log.npz's arrays of a run whose runner clock started at
     ``t0`` (and its dance at ``dance_start``; None: it never started)."""
-    from quaddance.play.dance import target_config_for
+    from quaddance.play.dance import feasible_max_height_m
     from quaddance.play.metrics import feasible_mask, tracking_metrics
 
     log = {k: np.asarray(v) for k, v in rows.items()}
@@ -196,7 +196,7 @@ def summarize(
     front, rear = None, None
     if dancing.sum() >= 2:
         tgt, fm = log["targets_m"][dancing], feet[dancing]
-        feasible_max = target_config_for(policy, "feasible").max_height_m
+        feasible_max = feasible_max_height_m(policy)
         front = tracking_metrics(tgt, fm, feasible_mask(tgt, feasible_max))
         rear = float(np.clip(fm[:, 2:], 0.0, None).mean())
     work = log["tick_ms"]

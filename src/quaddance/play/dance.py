@@ -57,19 +57,26 @@ class DanceOutputs:
     timings_s: dict[str, float] = field(default_factory=dict)
 
 
+def trained_max_height_m(policy: OnnxPolicy) -> float | None:
+    """The highest paw target of the range the policy was trained on (its JSON), if known."""
+    return policy.meta.get("targets", {}).get("max_height_m")
+
+
 def spec_for_policy(spec: DanceSpec, policy: OnnxPolicy) -> DanceSpec:
     """``spec`` with its paw targets in the range the policy was trained on (its JSON)."""
-    max_h = policy.meta.get("targets", {}).get("max_height_m")
+    max_h = trained_max_height_m(policy)
     if max_h is None:
         return spec
     return dataclasses.replace(spec, targets=dataclasses.replace(spec.targets, max_height_m=max_h))
 
 
-def target_config_for(policy: OnnxPolicy, mode: str):
-    """Targets in the range the policy was trained on (its JSON), in the requested mode."""
+def feasible_max_height_m(policy: OnnxPolicy) -> float:
+    """The paw height up to which the policy's feasible targets reach: its trained range, or
+    `TargetConfig`'s default."""
     from quaddance.targets import TargetConfig
 
-    return spec_for_policy(DanceSpec(targets=TargetConfig(mode=mode)), policy).targets
+    max_h = trained_max_height_m(policy)
+    return TargetConfig().max_height_m if max_h is None else max_h
 
 
 def run_dance(
@@ -280,7 +287,7 @@ def _run_dance(
         result.falls_s,
         sim_time_s=result.sim_wall_s,
         render_time_s=render_s,
-        feasible_max_m=target_config_for(policy, "feasible").max_height_m,
+        feasible_max_m=feasible_max_height_m(policy),
     )
     arrays = dict(
         time_s=result.time_s,
