@@ -418,7 +418,7 @@ def test_scene_foot_friction_reaches_the_simulated_model():
 def test_apply_dynamics_nominal_row_keeps_the_model():
     m = build_model()
     before = (m.geom_friction.copy(), m.body_mass.copy(), m.actuator_gainprm.copy())
-    apply_dynamics(m, np.array([1.0, 0.0, 1.0]))
+    apply_dynamics(m, np.array([1.0, 0.0, 1.0]), "trunk")
     np.testing.assert_array_equal(m.geom_friction, before[0])
     np.testing.assert_array_equal(m.body_mass, before[1])
     np.testing.assert_array_equal(m.actuator_gainprm, before[2])

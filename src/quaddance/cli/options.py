@@ -21,6 +21,9 @@ PolicyOpt = Annotated[
 RobotOpt = Annotated[
     str, typer.Option(help="sim (a simulated Go1 in another process) or go1 (a real one).")
 ]
+RobotModelOpt = Annotated[
+    str, typer.Option("--robot", help="Robot model: go1 or go2 (its limits and policy).")
+]
 RobotIpOpt = Annotated[str, typer.Option(help="go1: the robot's low-level IP.")]
 PowerLevelOpt = Annotated[
     int, typer.Option(help="go1: SDK PowerProtect level, 1 (10 %) to 10.", min=1, max=10)

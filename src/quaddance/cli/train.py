@@ -8,10 +8,11 @@ from typing import Annotated
 
 import typer
 
-from quaddance.cli.options import SeedRange, finite_in
+from quaddance.cli.options import RobotModelOpt, SeedRange, finite_in
 
 
 def train_cmd(
+    robot: RobotModelOpt = "go1",
     engine: Annotated[
         str, typer.Option(help="Physics: cpu (native MuJoCo) or gpu (MuJoCo Warp).")
     ] = "cpu",
@@ -94,6 +95,7 @@ def train_cmd(
     """Train the dance policy with PPO; exports RUN_DIR/policy.onnx and policy.json."""
     from rich.console import Console
 
+    from quaddance.robots import get_robot
     from quaddance.sim import tasks
     from quaddance.train import PRESETS, TrainCfg, train
 
@@ -108,6 +110,7 @@ def train_cmd(
         "reward_set": reward,
         "num_envs": num_envs or PRESETS[preset].num_envs,
         "front_feedforward": feedforward,
+        "robot": get_robot(robot),
     }
     if whole_body and curriculum is not None:
         start, end = curriculum

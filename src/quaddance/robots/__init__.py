@@ -13,16 +13,28 @@ from __future__ import annotations
 from quaddance.errors import QuaddanceError
 from quaddance.robots.config import BodyLimits, FrontLiftCfg, RobotCfg, SafetyLimits
 from quaddance.robots.go1 import GO1
+from quaddance.robots.go2 import GO2
 
-__all__ = ["GO1", "ROBOTS", "BodyLimits", "FrontLiftCfg", "RobotCfg", "SafetyLimits", "get_robot"]
+__all__ = [
+    "GO1",
+    "GO2",
+    "ROBOTS",
+    "BodyLimits",
+    "FrontLiftCfg",
+    "RobotCfg",
+    "SafetyLimits",
+    "get_robot",
+]
 
-ROBOTS: dict[str, RobotCfg] = {GO1.name: GO1}
+ROBOTS: dict[str, RobotCfg] = {GO1.name: GO1, GO2.name: GO2}
 """Every robot by name."""
 
 
 def get_robot(name: str) -> RobotCfg:
-    """The robot called ``name`` (`ROBOTS`), or one error listing those there are."""
-    try:
-        return ROBOTS[name]
-    except KeyError:
-        raise QuaddanceError(f"unknown robot {name!r}; known: {', '.join(ROBOTS)}") from None
+    """The robot called ``name`` (`ROBOTS`; the short form ``go2`` names ``unitree_go2``),
+    or one error listing those there are."""
+    robot = ROBOTS.get(name) or ROBOTS.get(f"unitree_{name}")
+    if robot is None:
+        known = ", ".join(r.removeprefix("unitree_") for r in ROBOTS)
+        raise QuaddanceError(f"unknown robot {name!r}; known: {known}")
+    return robot

@@ -25,14 +25,14 @@ from quaddance.sim.scene import SceneCfg, build_model
 from quaddance.sim.state import SensorLayout
 
 
-def apply_dynamics(model: mujoco.MjModel, row: np.ndarray) -> None:
+def apply_dynamics(model: mujoco.MjModel, row: np.ndarray, trunk_body: str) -> None:
     """Write one variant (friction, added base mass, motor strength) into a model in place.
 
     Friction goes to every robot collision geom: a calf touching the floor with another
     friction than the foot beside it would make the engines disagree.
     """
     model.geom_friction[robot_collision_geoms(model), 0] = row[FRICTION]
-    trunk = model.body("trunk").id
+    trunk = model.body(trunk_body).id
     model.body_mass[trunk] += row[ADDED_MASS_KG]
     # Position actuator: force = kp*(ctrl - q) - kd*qdot; strength scales both gains.
     model.actuator_gainprm[:, 0] *= row[MOTOR_STRENGTH]
@@ -65,7 +65,7 @@ class CpuEngine:
         self._variant_models = []
         for row in self.variants:
             m = copy.deepcopy(base)
-            apply_dynamics(m, row)
+            apply_dynamics(m, row, scene.robot.trunk_body)
             self._variant_models.append(m)
         self.variant_idx = np.zeros(num_envs, dtype=np.int64)
         self._models = [self._variant_models[0]] * num_envs

@@ -74,7 +74,7 @@ class WarpEngine:
             "bias": self._bias[0].clone(),
         }
         self._contact_geoms = torch.as_tensor(robot_collision_geoms(mjm))
-        self._trunk = mjm.body("trunk").id
+        self._trunk = mjm.body(scene.robot.trunk_body).id
         rows = nominal_dynamics(scene) if variants is None else np.asarray(variants)
         self.variants = rows
         self._variants = torch.as_tensor(rows, dtype=torch.float32, device=self.device)
