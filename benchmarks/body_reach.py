@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from quaddance.robots import GO1, RobotCfg
 from quaddance.sim.config import DanceTaskCfg
 
 SETTLE_S = 0.5  # from the spawn pose to standing (the feet spread about 3 cm meanwhile)
@@ -45,12 +46,18 @@ def _trials() -> list[tuple[int, float]]:
     ]
 
 
-def _run(trials: list[tuple[int, float]], paw_up: bool, policy=None) -> list[dict]:
+def _run(
+    trials: list[tuple[int, float]], paw_up: bool, policy=None, robot: RobotCfg = GO1
+) -> list[dict]:
     import copy
 
+    from quaddance.sim.scene import SceneCfg
     from quaddance.sim.task import DanceEnv
 
-    cfg = DanceTaskCfg(whole_body=True) if policy is None else copy.deepcopy(policy.task)
+    if policy is None:
+        cfg = DanceTaskCfg(whole_body=True, scene=SceneCfg(robot=robot))
+    else:
+        cfg = copy.deepcopy(policy.task)
     cfg.num_envs = len(trials)
     cfg.domain_rand.enabled = False
     n_settle = round(SETTLE_S * cfg.policy_hz)
@@ -136,20 +143,24 @@ def _ranges(results: list[dict]) -> dict[str, list[float]]:
     return out
 
 
-def bench_body_reach(policy=None) -> dict:
+def bench_body_reach(policy=None, robot: RobotCfg = GO1) -> dict:
     """Ranges held with four feet down and with the front-left paw up; every trial listed.
-    ``policy``: a whole-body `OnnxPolicy` balancing on top of the feed-forward; None: the
-    body feed-forward alone (a robot on three legs then tips: its paw-up range is 0)."""
+    ``policy``: a whole-body `OnnxPolicy` balancing on top of the feed-forward (on the robot
+    it was trained for); None: the body feed-forward alone on ``robot`` (a robot on three
+    legs then tips: its paw-up range is 0)."""
     if policy is not None and not policy.task.whole_body:
         from quaddance.errors import QuaddanceError
 
         raise QuaddanceError(f"{policy.onnx_path} is not a whole-body policy")
     trials = _trials()
-    four = _run(trials, paw_up=False, policy=policy)
-    paw = _run(trials, paw_up=True, policy=policy)
+    if policy is not None:
+        robot = policy.task.scene.robot
+    four = _run(trials, paw_up=False, policy=policy, robot=robot)
+    paw = _run(trials, paw_up=True, policy=policy, robot=robot)
     who = "the body feed-forward alone" if policy is None else f"policy {policy.onnx_path.name}"
     return {
-        "what": f"trunk poses held by {who}, nominal Go1, cpu engine",
+        "what": f"trunk poses held by {who}, nominal dynamics, cpu engine",
+        "robot": robot.name,
         "criteria": {
             "ramp_s": RAMP_S,
             "hold_s": HOLD_S,

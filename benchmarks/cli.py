@@ -11,7 +11,7 @@ from typing import Annotated, Any
 
 import typer
 
-from quaddance.cli.options import PolicyOpt, finite_in
+from quaddance.cli.options import PolicyOpt, RobotModelOpt, finite_in
 
 app = typer.Typer(no_args_is_help=True, help="Benchmarks; each writes a JSON file of results.")
 
@@ -481,21 +481,24 @@ def bench_body_reach_cmd(
         Path | None,
         typer.Option(help="A whole-body policy .onnx to balance; default: feed-forward alone."),
     ] = None,
+    robot: RobotModelOpt = "go1",
 ) -> None:
-    """The trunk poses (height, roll, pitch, yaw) a Go1 holds with four feet down and with a
-    front paw up: a sweep per column and sign, the range held without a fall, a foot lifting
-    or sliding, or the trunk missing the pose by more than 35 %. Writes JSON."""
+    """The trunk poses (height, roll, pitch, yaw) a robot holds with four feet down and with
+    a front paw up: a sweep per column and sign, the range held without a fall, a foot
+    lifting or sliding, or the trunk missing the pose by more than 35 %. Writes JSON. With
+    --policy the robot is the policy's."""
     from rich.console import Console
 
     from benchmarks.body_reach import bench_body_reach
     from benchmarks.live import machine_info
     from quaddance.fileio import write_json
     from quaddance.play.policy import OnnxPolicy
+    from quaddance.robots import get_robot
 
     console = Console(stderr=True)
     loaded = None if policy is None else OnnxPolicy.load(policy)
     with console.status("Sweeping trunk poses..."):
-        results = bench_body_reach(loaded)
+        results = bench_body_reach(loaded, get_robot(robot))
     results["machine"] = machine_info()
     for which in ("four_feet", "paw_up"):
         ranges = ", ".join(f"{k} {lo:+g}..{hi:+g}" for k, (lo, hi) in results[which].items())
@@ -528,12 +531,14 @@ def bench_reach_cmd(
             callback=finite_in(1e-4, 1.0),
         ),
     ] = 0.005,
+    robot: RobotModelOpt = "go1",
 ) -> None:
-    """Highest front-foot height the Go1 holds standing on three legs, in our simulator."""
+    """Highest front-foot height a robot holds standing on three legs, in our simulator."""
     from rich.console import Console
 
     from benchmarks.reach import DEFAULT_HEIGHTS_M, LIFTABLE_FEET, reach_report
     from quaddance.fileio import write_json
+    from quaddance.robots import get_robot
 
     chosen = tuple(feet or LIFTABLE_FEET)
     for foot in chosen:
@@ -549,7 +554,11 @@ def bench_reach_cmd(
             )
 
         results = reach_report(
-            chosen, tuple(heights or DEFAULT_HEIGHTS_M), tolerance, progress=show
+            chosen,
+            tuple(heights or DEFAULT_HEIGHTS_M),
+            tolerance,
+            progress=show,
+            robot=get_robot(robot),
         )
     write_json(out, results)
     for foot, r in results["feet"].items():

@@ -36,7 +36,7 @@ import mujoco
 import numpy as np
 
 from quaddance.errors import QuaddanceError
-from quaddance.robots import GO1
+from quaddance.robots import GO1, RobotCfg
 from quaddance.sim.scene import SceneCfg, build_model
 
 LIFTABLE_FEET: tuple[str, ...] = ("FL", "FR")
@@ -182,7 +182,7 @@ class _Planner:
     Works on its own MjData, so planning never touches the simulated state.
     """
 
-    def __init__(self, model: mujoco.MjModel, qpos: np.ndarray) -> None:
+    def __init__(self, model: mujoco.MjModel, qpos: np.ndarray, legs: tuple[str, ...]) -> None:
         self.model = model
         self.kin = mujoco.MjData(model)
         self.kin.qpos[:] = qpos
@@ -194,7 +194,7 @@ class _Planner:
                 np.array([model.joint(f"{leg}_{p}_joint").dofadr[0] for p in _PARTS]),
                 model.site(leg).id,
             )
-            for leg in GO1.legs
+            for leg in legs
         }
         self.joint_lo = model.jnt_range[1:, 0].copy()  # model joint order (after the base)
         self.joint_hi = model.jnt_range[1:, 1].copy()
@@ -346,14 +346,14 @@ class _ReachRig:
     def __init__(self, foot: str, cfg: ReachCfg, scene: SceneCfg) -> None:
         if foot not in LIFTABLE_FEET:
             raise QuaddanceError(f"foot must be one of {LIFTABLE_FEET}, got {foot!r}")
-        self.foot, self.cfg = foot, cfg
+        self.foot, self.cfg, self.robot = foot, cfg, scene.robot
         self.model = build_model(scene, visual=False)
         self.kp = self.model.actuator_gainprm[:, 0].copy()
-        self.stance_legs = tuple(leg for leg in GO1.feet if leg != foot)
+        self.stance_legs = tuple(leg for leg in self.robot.feet if leg != foot)
         # Only the stance legs are stiffened: the light lifted leg, fed its gravity torque,
         # holds still without it, and buzzes with it (extra gain applied at the control rate).
-        self.stiffened = np.array([leg != foot for leg in GO1.legs for _ in _PARTS])
-        self.site = {leg: self.model.site(leg).id for leg in GO1.feet}
+        self.stiffened = np.array([leg != foot for leg in self.robot.legs for _ in _PARTS])
+        self.site = {leg: self.model.site(leg).id for leg in self.robot.feet}
         model = self.model
         colliding = [g for g in range(model.ngeom) if model.geom_contype[g]]
         leg_bodies = {model.body(f"{foot}_{p}").id for p in ("thigh", "calf")}
@@ -374,22 +374,22 @@ class _ReachRig:
         mujoco.mj_step(self.model, data, nstep=self.steps_per_ctrl)
 
     def _foot_height(self, data: mujoco.MjData, leg: str) -> float:
-        return float(data.site_xpos[self.site[leg], 2]) - GO1.foot_radius_m
+        return float(data.site_xpos[self.site[leg], 2]) - self.robot.foot_radius_m
 
     def _shift(self) -> tuple[np.ndarray, _Stance]:
         cfg, model = self.cfg, self.model
         data = mujoco.MjData(model)
         mujoco.mj_resetDataKeyframe(model, data, model.key("home").id)
         mujoco.mj_forward(model, data)
-        planner = _Planner(model, data.qpos)
-        all_feet = dict.fromkeys(GO1.feet, 1.0)
+        planner = _Planner(model, data.qpos, self.robot.legs)
+        all_feet = dict.fromkeys(self.robot.feet, 1.0)
         q_home, tau_home = planner.joint_targets(), planner.holding_torques(all_feet)
         for _ in range(self._n_ctrl(cfg.settle_s)):
             self._step(data, q_home, tau_home)
         standing_qpos = data.qpos.copy()
 
-        planner = _Planner(model, standing_qpos)
-        feet_w = {leg: data.site_xpos[self.site[leg]].copy() for leg in GO1.feet}
+        planner = _Planner(model, standing_qpos, self.robot.legs)
+        feet_w = {leg: data.site_xpos[self.site[leg]].copy() for leg in self.robot.feet}
         # The lifted foot's path starts from where it stands relative to the trunk.
         swing_pref_b_xy = planner.to_trunk_xy(feet_w[self.foot])
         tri_xy = np.array([feet_w[leg][:2] for leg in self.stance_legs])
@@ -436,10 +436,10 @@ class _ReachRig:
         cfg, st = self.cfg, self.stance
         data = mujoco.MjData(self.model)
         mujoco.mj_copyData(data, self.model, st.data)
-        planner = _Planner(self.model, st.planner_qpos)
+        planner = _Planner(self.model, st.planner_qpos, self.robot.legs)
         worst = dict(st.worst)
         loads = dict.fromkeys(self.stance_legs, 1.0)
-        z_goal = target_m + GO1.foot_radius_m
+        z_goal = target_m + self.robot.foot_radius_m
         n_lift, n_hold = self._n_ctrl(cfg.lift_s), self._n_ctrl(cfg.hold_s)
         n_window = min(n_hold, self._n_ctrl(cfg.measure_window_s))
         heights: list[float] = []
@@ -450,7 +450,7 @@ class _ReachRig:
                 z_offset += (
                     cfg.height_gain_per_s
                     * self.dt_ctrl_s
-                    * (z_plan - GO1.foot_radius_m - heights[-1])
+                    * (z_plan - self.robot.foot_radius_m - heights[-1])
                 )
                 z_offset = min(max(z_offset, -cfg.max_height_offset_m), cfg.max_height_offset_m)
             z = z_plan + z_offset
@@ -519,8 +519,8 @@ def kinematic_reach(
 
     Returns ``{"height_m", "joint_pos_rad" (hip, thigh, calf), "foot_pos_w_m" (3,)}``.
     """
-    if foot not in GO1.feet:
-        raise QuaddanceError(f"foot must be one of {GO1.feet}, got {foot!r}")
+    if foot not in scene.robot.feet:
+        raise QuaddanceError(f"foot must be one of {scene.robot.feet}, got {foot!r}")
     model = build_model(scene, visual=False)
     data = mujoco.MjData(model)
     mujoco.mj_resetDataKeyframe(model, data, model.key("home").id)
@@ -541,7 +541,7 @@ def kinematic_reach(
             forward_w = data.xmat[1].reshape(3, 3)[:, 0]
             if np.dot(foot_w - data.xpos[hip], forward_w) < 0.0:
                 return -np.inf
-        return float(foot_w[2]) - GO1.foot_radius_m
+        return float(foot_w[2]) - scene.robot.foot_radius_m
 
     best_q, best_h = (lo + hi) / 2, -np.inf
     centre, half = (lo + hi) / 2, (hi - lo) / 2
@@ -654,6 +654,7 @@ def reach_report(
     tolerance_m: float = 0.005,
     cfg: ReachCfg = ReachCfg(),
     progress: Callable[[str, dict[str, Any]], None] | None = None,
+    robot: RobotCfg = GO1,
 ) -> dict[str, Any]:
     """`measure_reach` for each of ``feet`` with its wall time, as the `bench reach` JSON.
 
@@ -668,6 +669,7 @@ def reach_report(
             heights,
             tolerance_m,
             cfg,
+            SceneCfg(robot=robot),
             progress=None if progress is None else functools.partial(progress, foot),
         )
         result["wall_s"] = round(time.perf_counter() - t0, 3)
@@ -677,6 +679,7 @@ def reach_report(
         "benchmark": "reach",
         "what": "highest front-foot height held standing on three legs (quasi-static "
         "controller in native MuJoCo, dance scene), and the time to measure it",
+        "robot": robot.name,
         "reach_m_min": min(r["reach_m"] for r in per_foot.values()),
         "held_m_min": min(r["held_m"] for r in per_foot.values()),
         "kinematic_bound_front_m": min(r["kinematic_bound_front_m"] for r in per_foot.values()),

@@ -59,7 +59,12 @@ GO2 = RobotCfg(
     armature=_per_joint(_ARMATURE, _ARMATURE, _ARMATURE),
     min_base_height_m=0.12,
     max_tilt_rad=1.0,
-    max_paw_height_m=0.25,
+    # Highest front-foot target while standing on three legs: 80 % of the 0.515 m that the
+    # Go2 held in our simulator (`quaddance bench reach --robot go2`, quasi-static, trunk at
+    # 0.32 m; benchmarks/results/reach_go2.json), where its front thigh's range (to -90 deg,
+    # the Go1's to -39 deg) is the limit. A policy declares the range it was trained on in
+    # its JSON, and `quaddance dance` uses that instead.
+    max_paw_height_m=0.41,
     body_four_feet=BodyLimits(
         height_offset_m=(-0.06, 0.03), roll_rad=0.25, pitch_rad=0.20, yaw_rad=0.25
     ),
