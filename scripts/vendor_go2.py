@@ -10,7 +10,8 @@ committed; this script records how it was made:
 What changes from the source, and why:
 - The visual meshes are simplified by vertex clustering (1 mm cells) and stored as binary
   STL: 20 MB of OBJ become about 3 MB, and they only draw the video. `base_4.obj` (the
-  trunk's grey trim) is not in the mirror this was made from; its geom is dropped.
+  trunk's grey shell) is not in the mirror this was made from: a grey box of the trunk's
+  collision size stands in for it.
 - Collision geometry is the source's primitives (boxes, cylinders, spheres), named as
   quaddance's robot config reads them (`*_collision`, feet `FL_foot_collision`...), and a
   site at each foot sphere's centre named after its leg.
@@ -120,6 +121,20 @@ def main() -> None:
             spec.delete(geom)
     for mesh in missing:
         spec.delete(mesh)
+    if "base_4" in missing_names:
+        # The grey shell of the trunk: a box the size of the trunk's collision box stands in.
+        trunk = spec.body("base_link")
+        box = next(g for g in trunk.geoms if g.type == mujoco.mjtGeom.mjGEOM_BOX)
+        trunk.add_geom(
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            size=box.size,
+            pos=box.pos,
+            material="gray",
+            contype=0,
+            conaffinity=0,
+            group=2,
+            name="base_shell",
+        )
     for mesh in spec.meshes:
         verts, faces = read_obj(src / "assets" / mesh.file)
         verts, faces = cluster(verts, faces, CELL_M)
