@@ -284,6 +284,41 @@ def test_build_bank_makes_and_caches_front_foot_targets(tmp_path):
     np.testing.assert_array_equal(build_bank(cfg), bank[:1] * 0.5)
 
 
+def test_an_eq4_bank_scales_with_h0(tmp_path):
+    """``target_mode="paper"``: each sequence is eq. 4's h0 * h / max(h), so halving h0 halves
+    the bank, and each sequence peaks near h0 (its human peak, resampled to 50 Hz)."""
+    banks = {
+        h0: build_bank(
+            make_cfg(tmp_path / str(h0), bank_duration_s=8.0, target_mode="paper", h0_m=h0)
+        )
+        for h0 in (0.5, 2.0)
+    }
+    np.testing.assert_allclose(banks[2.0], 4.0 * banks[0.5], rtol=1e-5, atol=1e-6)
+    peaks = banks[0.5][:, :, :2].max(axis=(1, 2))
+    assert np.all((peaks > 0.45) & (peaks <= 0.5 + 1e-6))
+    assert np.all(banks[0.5][:, :, 2:] == 0)
+
+
+def test_an_eq4_policy_records_its_targets_and_dances_them(tmp_path):
+    from quaddance.pipeline import DanceSpec
+    from quaddance.play.dance import spec_for_policy
+    from quaddance.play.policy import OnnxPolicy
+
+    cfg = make_cfg(tmp_path, target_mode="paper", h0_m=0.5, iterations=1)
+    cfg.task = tasks.paws_only(num_envs=NUM_ENVS, c_r=-3.0, without=("rear_lift_l1",))
+    trainer = Trainer(cfg, bank=small_bank(), log=lambda *a: None)
+    onnx_path, json_path = trainer.export()
+    meta = json.loads(json_path.read_text())
+    assert meta["targets"] == {"max_height_m": GO1.max_paw_height_m, "mode": "paper", "h0_m": 0.5}
+    assert meta["task"]["rewards"]["rear_lift"]["weight"] == -3.0
+    assert "rear_lift_l1" not in meta["task"]["rewards"]
+    spec = PolicySpec.load(json_path)
+    assert (spec.targets_mode, spec.targets_h0_m) == ("paper", 0.5)
+    assert spec.task_cfg == cfg.task
+    targets = spec_for_policy(DanceSpec(), OnnxPolicy.load(onnx_path)).targets
+    assert (targets.mode, targets.h0_m) == ("paper", 0.5)
+
+
 # --- CLI ------------------------------------------------------------------------------------
 
 
@@ -300,6 +335,10 @@ def test_train_help():
         (["--engine", "nope"], "cpu or gpu"),
         (["--preset", "huge"], "huge"),
         (["--reward", "table1-9"], "table1-9"),
+        (["--mode", "minmax"], "--mode must be one of feasible, paper"),
+        (["--h0", "0"], "not a finite number"),
+        (["--c-r", "5"], "not a finite number"),
+        (["--without", "nope"], "no reward term 'nope'"),
     ],
 )
 def test_train_rejects_bad_options_before_any_work(tmp_path, args, needle):
@@ -335,6 +374,37 @@ def test_train_whole_body_curriculum_option(tmp_path, monkeypatch, args, want):
     assert seen["cfg"].task.curriculum_env_steps == want
     # The CLI's whole-body task is the variant's, whatever the curriculum.
     assert seen["cfg"].task == tasks.whole_body(num_envs=256, curriculum_env_steps=want)
+
+
+@pytest.mark.parametrize(
+    ("args", "mode", "h0_m", "c_r", "dropped"),
+    [
+        ([], "feasible", 2.0, -30.0, ()),
+        (["--mode", "paper", "--h0", "0.5"], "paper", 0.5, -30.0, ()),
+        (["--c-r", "-3", "--without", "rear_lift_l1"], "feasible", 2.0, -3.0, ("rear_lift_l1",)),
+        (["--without", "ours"], "feasible", 2.0, -30.0, tasks.OUR_TERMS),
+    ],
+)
+def test_train_study_options_reach_the_bank_and_the_rewards(
+    tmp_path, monkeypatch, args, mode, h0_m, c_r, dropped
+):
+    import quaddance.train as train_mod
+
+    seen = {}
+
+    def fake_train(cfg, **kwargs):
+        seen["cfg"] = cfg
+        raise SystemExit(0)
+
+    monkeypatch.setattr(train_mod, "train", fake_train)
+    monkeypatch.setattr(train_mod, "build_bank", lambda cfg: None)
+    result = CliRunner().invoke(app, ["train", "--run-dir", str(tmp_path / "run"), *args])
+    assert result.exit_code == 0, result.output
+    cfg = seen["cfg"]
+    assert (cfg.target_mode, cfg.h0_m) == (mode, h0_m)
+    assert cfg.task.rewards["rear_lift"].weight == c_r
+    assert set(tasks.dance_rewards()) - set(cfg.task.rewards) == set(dropped)
+    assert cfg.task == tasks.paws_only(num_envs=256, c_r=c_r, without=dropped)
 
 
 def test_train_curriculum_rejects_an_end_before_its_start(tmp_path):

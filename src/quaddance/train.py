@@ -68,6 +68,10 @@ class TrainCfg:
     bank_size: int = 256
     bank_duration_s: float = 32.0
     max_height_m: float | None = None  # feasible target bound; None: targets' default
+    # How the bank's human dances become paw targets: "feasible", or "paper" (eq. 4,
+    # h0_m * h / max(h), the paper's study of h0 in section 4.3.3).
+    target_mode: str = "feasible"
+    h0_m: float = 2.0  # eq. 4's h0 (the paper's headline value); only for target_mode "paper"
     checkpoint_every_s: float = 120.0
     max_minutes: float | None = None  # wall-clock budget of this call; stops cleanly
     torch_threads: int | None = None
@@ -188,12 +192,32 @@ def curriculum_scale_at(ramp: tuple[int, int] | None, env_steps: int) -> float:
     return (env_steps - start) / (end - start)
 
 
+#: Target modes a training bank can be made in (`quaddance.layout.MODES`).
+TRAIN_MODES: tuple[str, ...] = ("feasible", "paper")
+
+
 def _target_cfg(cfg: TrainCfg):
     from quaddance.targets import TargetConfig
 
-    return (
-        TargetConfig() if cfg.max_height_m is None else TargetConfig(max_height_m=cfg.max_height_m)
-    )
+    if cfg.target_mode not in TRAIN_MODES:
+        raise QuaddanceError(
+            f"unknown training target mode {cfg.target_mode!r}: use {', '.join(TRAIN_MODES)}"
+        )
+    bound = {} if cfg.max_height_m is None else {"max_height_m": cfg.max_height_m}
+    return TargetConfig(mode=cfg.target_mode, h0_m=cfg.h0_m, **bound)
+
+
+def targets_record(cfg: TrainCfg, bank: np.ndarray) -> dict:
+    """The policy JSON's ``targets``: the highest feasible front target (the bank's own for a
+    feasible bank, else the feasible bound it was not held to), and for an eq. 4 bank its mode
+    and h0, with which playback makes the targets the policy learnt to track."""
+    if cfg.target_mode == "feasible":
+        return {"max_height_m": round(float(bank[..., :2].max()), 4)}
+    return {
+        "max_height_m": _target_cfg(cfg).max_height_m,
+        "mode": cfg.target_mode,
+        "h0_m": cfg.h0_m,
+    }
 
 
 def _config_dict(cfg: TrainCfg) -> dict:
@@ -493,9 +517,8 @@ def policy_metadata(env, cfg: TrainCfg, trainer: Trainer | None = None) -> dict:
             "normalization": "inside the ONNX model (running mean/std)",
         },
         "task": task_record(task),  # the task as trained (reward terms, envs, ...)
-        # The range of front targets the policy trained on (read off its bank): playback
-        # makes targets in the same range.
-        "targets": {"max_height_m": round(float(env.bank[..., :2].max()), 4)},
+        # The targets the policy trained on: playback makes the same kind, in the same range.
+        "targets": targets_record(cfg, env.bank),
         "training": {
             "engine": cfg.engine,
             "preset": cfg.preset,

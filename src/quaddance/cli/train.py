@@ -30,6 +30,37 @@ def train_cmd(
     reward: Annotated[
         str, typer.Option(help="paper (eq. 2: c_f 30, lambda_f 10), l2, or table1-1 ... table1-5.")
     ] = "paper",
+    c_r: Annotated[
+        float,
+        typer.Option(
+            "--c-r",
+            help="Eq. 3's rear-leg weight c_r (the paper settled on -30).",
+            callback=finite_in(-1e4, 0.0),
+        ),
+    ] = -30.0,
+    without: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--without",
+            help="Leave a reward term out (repeatable); 'ours' leaves out every term that is "
+            "not the paper's (rear_lift_l1, foot_slide, base_drift, yaw_rate).",
+            metavar="TERM",
+        ),
+    ] = None,
+    mode: Annotated[
+        str,
+        typer.Option(
+            help="Targets of the training bank: feasible, or paper (eq. 4: h0 * h / max(h))."
+        ),
+    ] = "feasible",
+    h0: Annotated[
+        float,
+        typer.Option(
+            "--h0",
+            help="Eq. 4's h0, m, with --mode paper (the paper: 2; 0.5 kept the paws down).",
+            callback=finite_in(0.01, 10.0),
+        ),
+    ] = 2.0,
     preset: Annotated[
         str, typer.Option(help="cpu (small nets, fast on 2 cores) or paper (512-256-128, GPUs).")
     ] = "cpu",
@@ -97,7 +128,7 @@ def train_cmd(
 
     from quaddance.robots import get_robot
     from quaddance.sim import tasks
-    from quaddance.train import PRESETS, TrainCfg, train
+    from quaddance.train import PRESETS, TRAIN_MODES, TrainCfg, train
 
     if engine not in ("cpu", "gpu"):
         raise typer.BadParameter(f"--engine must be cpu or gpu, got {engine!r}")
@@ -106,8 +137,19 @@ def train_cmd(
     if reward not in tasks.REWARD_SETS:
         sets = ", ".join(tasks.REWARD_SETS)
         raise typer.BadParameter(f"--reward must be one of {sets}, got {reward!r}")
+    if mode not in TRAIN_MODES:
+        raise typer.BadParameter(f"--mode must be one of {', '.join(TRAIN_MODES)}, got {mode!r}")
+    named = [tasks.OUR_TERMS if name == "ours" else (name,) for name in without or ()]
+    dropped = tuple(dict.fromkeys(name for names in named for name in names))
+    known = tasks.dance_rewards(whole_body=whole_body)
+    for name in dropped:
+        if name not in known:
+            terms = ", ".join(known)
+            raise typer.BadParameter(f"--without: no reward term {name!r} (ours, {terms})")
     options: dict = {
         "reward_set": reward,
+        "c_r": c_r,
+        "without": dropped,
         "num_envs": num_envs or PRESETS[preset].num_envs,
         "front_feedforward": feedforward,
         "robot": get_robot(robot),
@@ -130,6 +172,8 @@ def train_cmd(
         resume=resume,
         bank_size=bank_size,
         max_height_m=max_height,
+        target_mode=mode,
+        h0_m=h0,
         checkpoint_every_s=checkpoint_every,
         max_minutes=minutes,
         init_from=init_from,

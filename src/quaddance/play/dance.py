@@ -63,11 +63,17 @@ def trained_max_height_m(policy: OnnxPolicy) -> float | None:
 
 
 def spec_for_policy(spec: DanceSpec, policy: OnnxPolicy) -> DanceSpec:
-    """``spec`` with its paw targets in the range the policy was trained on (its JSON)."""
-    max_h = trained_max_height_m(policy)
-    if max_h is None:
+    """``spec`` with its paw targets in the range the policy was trained on (its JSON); a
+    policy trained on eq. 4 targets dances eq. 4 targets with its h0, the only kind it saw."""
+    trained = policy.meta.get("targets", {})
+    changes: dict[str, Any] = {}
+    if trained.get("max_height_m") is not None:
+        changes["max_height_m"] = trained["max_height_m"]
+    if trained.get("mode") == "paper":
+        changes |= {"mode": "paper", "h0_m": trained["h0_m"]}
+    if not changes:
         return spec
-    return dataclasses.replace(spec, targets=dataclasses.replace(spec.targets, max_height_m=max_h))
+    return dataclasses.replace(spec, targets=dataclasses.replace(spec.targets, **changes))
 
 
 def feasible_max_height_m(policy: OnnxPolicy) -> float:

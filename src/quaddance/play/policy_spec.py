@@ -123,6 +123,9 @@ class PolicySpec:
     task: dict[str, Any]  # as in the file; `task_cfg` builds the dataclasses
     targets_max_height_m: float
     training: dict[str, Any] = field(default_factory=dict)
+    # The bank's target mode; a "paper" (eq. 4) policy also has its h0, m.
+    targets_mode: str = "feasible"
+    targets_h0_m: float | None = None
     robot: str = GO1.name
     format: str = FORMAT
 
@@ -171,7 +174,12 @@ class PolicySpec:
                 "normalization": self.obs_normalization,
             },
             "task": _plain(self.task),
-            "targets": {"max_height_m": self.targets_max_height_m},
+            "targets": {"max_height_m": self.targets_max_height_m}
+            | (
+                {}
+                if self.targets_mode == "feasible"
+                else {"mode": self.targets_mode, "h0_m": self.targets_h0_m}
+            ),
             "training": dict(self.training),
         }
 
@@ -255,13 +263,7 @@ class PolicySpec:
             decimation=r.integer(obj, "decimation", 1, 100),
             **_read_obs(r, obj),
             task=task,
-            targets_max_height_m=r.number(
-                r.obj(obj["targets"], "targets", required=("max_height_m",)),
-                "max_height_m",
-                0.0,  # a bank of all-zero targets (tests) trains a policy that stands
-                1.0,
-                prefix="targets.",
-            ),
+            **_read_targets(r, obj["targets"]),
             training=_read_training(r, obj["training"]),
         )
         _check_agreement(r, spec)
@@ -564,6 +566,24 @@ def _read_rewards(r: _Reader, value: Any) -> dict[str, Any]:
         except ValueError as err:
             r.fail(p + "fn", str(err))
         out[term_name] = term
+    return out
+
+
+def _read_targets(r: _Reader, value: Any) -> dict[str, Any]:
+    """The targets the policy trained on: the feasible range, and an eq. 4 bank's mode and h0."""
+    obj = r.obj(value, "targets", required=("max_height_m",), optional=("mode", "h0_m"))
+    out: dict[str, Any] = {
+        # 0: a bank of all-zero targets (tests) trains a policy that stands
+        "targets_max_height_m": r.number(obj, "max_height_m", 0.0, 1.0, "targets."),
+    }
+    if "mode" in obj or "h0_m" in obj:
+        r.obj(obj, "targets", required=("max_height_m", "mode", "h0_m"))
+        if obj["mode"] != "paper":
+            r.fail(
+                "targets.mode", f"{_short(obj['mode'])}; a policy's targets are feasible or paper"
+            )
+        out["targets_mode"] = "paper"
+        out["targets_h0_m"] = r.number(obj, "h0_m", 1e-3, 100.0, "targets.")
     return out
 
 

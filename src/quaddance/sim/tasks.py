@@ -29,6 +29,12 @@ TABLE1: dict[str, tuple[float, float]] = {
 #: and the rows of Table 1.
 REWARD_SETS: tuple[str, ...] = ("paper", "l2", *TABLE1)
 
+#: eq. 3's rear-leg weight c_r, the paper's final choice (section 4.3.1).
+C_R = -30.0
+#: The reward terms that are ours, not the paper's (eq. 2, eq. 3, Walk These Ways' auxiliaries
+#: and a fall penalty): leaving them all out gives the paper's reward table.
+OUR_TERMS: tuple[str, ...] = ("rear_lift_l1", "foot_slide", "base_drift", "yaw_rate")
+
 #: `whole_body`'s curriculum from scratch, env steps: the paws-only task for 3 M steps (the
 #: policy learns to stand and tap first), then the whole-body task grows in until 13 M. A run
 #: that ramped only the trunk targets, with the trunk rewards at full weight from the start,
@@ -49,11 +55,17 @@ def front_tracking(reward_set: str = "paper") -> RewardTerm:
     return RewardTerm(rewards.front_tracking, 1.0, {"c_f": c_f, "lambda_f": lambda_f})
 
 
-def dance_rewards(reward_set: str = "paper", whole_body: bool = False) -> dict[str, RewardTerm]:
-    """The reward terms, in the order they are summed."""
+def dance_rewards(
+    reward_set: str = "paper",
+    whole_body: bool = False,
+    c_r: float = C_R,
+    without: tuple[str, ...] = (),
+) -> dict[str, RewardTerm]:
+    """The reward terms, in the order they are summed; ``c_r``: eq. 3's weight; ``without``:
+    terms left out (names of `OUR_TERMS` or any other term)."""
     terms = {
         "front_tracking": front_tracking(reward_set),
-        "rear_lift": RewardTerm(rewards.rear_lift, -30.0),  # eq. 3's c_r
+        "rear_lift": RewardTerm(rewards.rear_lift, c_r),  # eq. 3
         # Ours: eq. 3 is tiny for cm-scale lifts (2 cm -> 0.012), so a linear term keeps the
         # rear feet down.
         "rear_lift_l1": RewardTerm(rewards.rear_lift_l1, -50.0),
@@ -92,7 +104,10 @@ def dance_rewards(reward_set: str = "paper", whole_body: bool = False) -> dict[s
         }
     # Once per fall; outweighs the discounted penalties it escapes.
     terms["termination"] = RewardTerm(rewards.fall, -200.0, per_step=False)
-    return terms
+    unknown = [name for name in without if name not in terms]
+    if unknown:
+        raise ValueError(f"no reward term {unknown[0]!r}: the terms are {', '.join(terms)}")
+    return {name: term for name, term in terms.items() if name not in without}
 
 
 def paws_only(
@@ -100,13 +115,16 @@ def paws_only(
     num_envs: int = 256,
     front_feedforward: bool = True,
     robot: RobotCfg = GO1,
+    c_r: float = C_R,
+    without: tuple[str, ...] = (),
 ) -> DanceTaskCfg:
-    """The paper's task: the front paws track their height targets, the rear feet stay down."""
+    """The paper's task: the front paws track their height targets, the rear feet stay down
+    (``c_r``, ``without``: see `dance_rewards`)."""
     return DanceTaskCfg(
         num_envs=num_envs,
         front_feedforward=front_feedforward,
         scene=SceneCfg(robot=robot),
-        rewards=dance_rewards(reward_set),
+        rewards=dance_rewards(reward_set, c_r=c_r, without=without),
     )
 
 
@@ -116,17 +134,20 @@ def whole_body(
     front_feedforward: bool = True,
     curriculum_env_steps: tuple[int, int] | None = WHOLE_BODY_CURRICULUM_ENV_STEPS,
     robot: RobotCfg = GO1,
+    c_r: float = C_R,
+    without: tuple[str, ...] = (),
 ) -> DanceTaskCfg:
     """The trunk dances too: body targets in the bank and the observation, the heading error
     (`ObsCfg.heading`), trunk-tracking rewards, the body feed-forward, and a curriculum
-    (None: the full task from the start, as when starting from a trained policy)."""
+    (None: the full task from the start, as when starting from a trained policy);
+    ``c_r``, ``without``: see `dance_rewards`."""
     return DanceTaskCfg(
         num_envs=num_envs,
         front_feedforward=front_feedforward,
         scene=SceneCfg(robot=robot),
         whole_body=True,
         obs=ObsCfg(heading=True),
-        rewards=dance_rewards(reward_set, whole_body=True),
+        rewards=dance_rewards(reward_set, whole_body=True, c_r=c_r, without=without),
         curriculum_env_steps=curriculum_env_steps,
     )
 
