@@ -8,9 +8,6 @@ paper's "reward hacking", section 4.3.3).
 
 from __future__ import annotations
 
-import csv
-import gzip
-import io
 from pathlib import Path
 from typing import Any
 
@@ -18,23 +15,10 @@ import numpy as np
 
 from quaddance.errors import InputFileError
 from quaddance.fileio import atomic_path, write_json
+from quaddance.train import read_curve
 
 #: Points of comparison, env steps.
 AT_ENV_STEPS: tuple[int, ...] = (250_000, 500_000, 1_000_000, 1_500_000, 2_000_000)
-
-
-def read_curve(path: Path) -> dict[str, np.ndarray]:
-    """A run's `curve.csv` (or `.csv.gz`) as columns of floats."""
-    try:
-        raw = path.read_bytes()
-        text = gzip.decompress(raw).decode() if path.suffix == ".gz" else raw.decode()
-        rows = list(csv.DictReader(io.StringIO(text)))
-        cols = {k: np.array([float(r[k]) for r in rows]) for k in rows[0]}
-    except (OSError, ValueError, IndexError, KeyError, gzip.BadGzipFile, EOFError) as err:
-        raise InputFileError(path, f"not a readable learning curve ({err})") from err
-    if "env_steps" not in cols or "front_abs_err_m" not in cols:
-        raise InputFileError(path, "learning curve lacks env_steps or front_abs_err_m")
-    return cols
 
 
 def _window_mean(cols: dict[str, np.ndarray], key: str, at: int, width: int) -> float | None:

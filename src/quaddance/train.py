@@ -11,6 +11,7 @@ import contextlib
 import copy
 import csv
 import dataclasses
+import gzip
 import io
 import json
 import math
@@ -599,6 +600,20 @@ def _append_csv(path: Path, row: dict) -> None:
         if new:
             w.writeheader()
         w.writerow(row)
+
+
+def read_curve(path: Path) -> dict[str, np.ndarray]:
+    """A run's `curve.csv` (or `.csv.gz`) as columns of floats."""
+    try:
+        raw = path.read_bytes()
+        text = gzip.decompress(raw).decode() if path.suffix == ".gz" else raw.decode()
+        rows = list(csv.DictReader(io.StringIO(text)))
+        cols = {k: np.array([float(r[k]) for r in rows]) for k in rows[0]}
+    except (OSError, ValueError, IndexError, KeyError, gzip.BadGzipFile, EOFError) as err:
+        raise InputFileError(path, f"not a readable learning curve ({err})") from err
+    if "env_steps" not in cols or "front_abs_err_m" not in cols:
+        raise InputFileError(path, "learning curve lacks env_steps or front_abs_err_m")
+    return cols
 
 
 def _progress_bar(enabled: bool):

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import typer
 
-from quaddance.cli import choreograph, dance, deploy, evaluate, live, music, train
+from quaddance.cli import choreograph, dance, deploy, evaluate, live, music, study, train
 from quaddance.cli._exit import EXIT_SIGINT, EXIT_SIGTERM, one_line_error
 from quaddance.cli._exit import run_command as _run_command
 from quaddance.cli.bench import add_bench
@@ -29,6 +29,7 @@ app.command("dance")(dance.dance_cmd)
 app.command("deploy")(deploy.deploy_cmd)
 app.command("live")(live.live_cmd)
 app.command("eval")(evaluate.eval_cmd)
+app.command("study")(study.study_cmd)
 add_bench(app)
 
 
