@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -128,6 +129,21 @@ def test_study_rejects_bad_options_in_one_line(tmp_path, monkeypatch, capsys, ar
     err = capsys.readouterr().err
     assert needle in err
     assert not out.exists()
+
+
+def test_the_command_defaults_are_the_study_defaults():
+    import inspect
+
+    from quaddance.cli.study import study_cmd
+
+    defaults = {k: p.default for k, p in inspect.signature(study_cmd).parameters.items()}
+    cfg = study.StudyCfg()
+    assert (defaults["budget"], defaults["seeds"], defaults["out"]) == (
+        cfg.budget_env_steps,
+        cfg.seeds,
+        cfg.out,
+    )
+    assert cfg.report == Path("docs/results/study.md")
 
 
 def test_an_unknown_variant_fails_before_any_work(tmp_path):
