@@ -349,15 +349,8 @@ def test_train_rejects_bad_options_before_any_work(tmp_path, args, needle):
     assert not run_dir.exists()
 
 
-@pytest.mark.parametrize(
-    ("args", "want"),
-    [
-        ([], (3_000_000, 13_000_000)),  # the default from scratch
-        (["--curriculum", "0.001", "0.002"], (1_000, 2_000)),
-        (["--curriculum", "0", "0"], None),  # the whole task at once
-    ],
-)
-def test_train_whole_body_curriculum_option(tmp_path, monkeypatch, args, want):
+def cli_train_cfg(monkeypatch, args: list[str]) -> TrainCfg:
+    """The `TrainCfg` that ``quaddance train ARGS`` trains (nothing is trained)."""
     import quaddance.train as train_mod
 
     seen = {}
@@ -368,12 +361,24 @@ def test_train_whole_body_curriculum_option(tmp_path, monkeypatch, args, want):
 
     monkeypatch.setattr(train_mod, "train", fake_train)
     monkeypatch.setattr(train_mod, "build_bank", lambda cfg: None)
-    run = ["train", "--whole-body", "--run-dir", str(tmp_path / "run"), *args]
-    result = CliRunner().invoke(app, run)
+    result = CliRunner().invoke(app, ["train", *args])
     assert result.exit_code == 0, result.output
-    assert seen["cfg"].task.curriculum_env_steps == want
+    return seen["cfg"]
+
+
+@pytest.mark.parametrize(
+    ("args", "want"),
+    [
+        ([], (3_000_000, 13_000_000)),  # the default from scratch
+        (["--curriculum", "0.001", "0.002"], (1_000, 2_000)),
+        (["--curriculum", "0", "0"], None),  # the whole task at once
+    ],
+)
+def test_train_whole_body_curriculum_option(tmp_path, monkeypatch, args, want):
+    cfg = cli_train_cfg(monkeypatch, ["--whole-body", "--run-dir", str(tmp_path / "run"), *args])
+    assert cfg.task.curriculum_env_steps == want
     # The CLI's whole-body task is the variant's, whatever the curriculum.
-    assert seen["cfg"].task == tasks.whole_body(num_envs=256, curriculum_env_steps=want)
+    assert cfg.task == tasks.whole_body(num_envs=256, curriculum_env_steps=want)
 
 
 @pytest.mark.parametrize(
@@ -388,19 +393,7 @@ def test_train_whole_body_curriculum_option(tmp_path, monkeypatch, args, want):
 def test_train_study_options_reach_the_bank_and_the_rewards(
     tmp_path, monkeypatch, args, mode, h0_m, c_r, dropped
 ):
-    import quaddance.train as train_mod
-
-    seen = {}
-
-    def fake_train(cfg, **kwargs):
-        seen["cfg"] = cfg
-        raise SystemExit(0)
-
-    monkeypatch.setattr(train_mod, "train", fake_train)
-    monkeypatch.setattr(train_mod, "build_bank", lambda cfg: None)
-    result = CliRunner().invoke(app, ["train", "--run-dir", str(tmp_path / "run"), *args])
-    assert result.exit_code == 0, result.output
-    cfg = seen["cfg"]
+    cfg = cli_train_cfg(monkeypatch, ["--run-dir", str(tmp_path / "run"), *args])
     assert (cfg.target_mode, cfg.h0_m) == (mode, h0_m)
     assert cfg.task.rewards["rear_lift"].weight == c_r
     assert set(tasks.dance_rewards()) - set(cfg.task.rewards) == set(dropped)

@@ -33,6 +33,7 @@ import numpy as np
 from quaddance.errors import QuaddanceError
 from quaddance.fileio import atomic_path, write_json
 from quaddance.sim import tasks
+from quaddance.sim.config import DanceTaskCfg
 
 #: Steps each env takes per PPO iteration (the cpu preset's).
 STEPS_PER_ENV = 24
@@ -51,7 +52,7 @@ class Variant:
     h0_m: float = 2.0
     feedforward: bool = True
 
-    def task(self, num_envs: int):
+    def task(self, num_envs: int) -> DanceTaskCfg:
         """The variant's `DanceTaskCfg`."""
         return tasks.paws_only(
             self.reward_set, num_envs, self.feedforward, c_r=self.c_r, without=self.without
@@ -129,12 +130,15 @@ THRESHOLDS: dict[str, Any] = {
 #: Iterations averaged when reading the 2 cm crossing off a curve.
 CURVE_WINDOW = 5
 
-#: Default budget, env steps per run, sized for the whole study (12 variants x 2 seeds, less
-#: the default's Table 1 twin: 22 runs) in about 2 hours on 2 CPU cores: PPO on this task runs
-#: about 5,000 env steps/s there at 256 envs (`bench train`: 6,370; the shipped 19 M-step run:
-#: 4,730 on average), so 1.4 M steps take about 280 s; the bank, the export and the
-#: evaluation (4 items of 20 s) add about 40 s a run. 22 x 320 s = 7,040 s.
-DEFAULT_BUDGET = 1_400_000
+#: PPO env steps/s on this task with 256 envs on 2 CPU cores (`bench train`: 6,370; the
+#: shipped 19 M-step run: 4,730 on average) and the seconds each run adds (bank, export,
+#: evaluation of 4 items of 20 s): the study's estimate of its time until a run has finished.
+CPU_ENV_STEPS_PER_S = 5_000
+RUN_OVERHEAD_S = 40.0
+#: Default budget, env steps per run, sized for the whole study (12 variants x 2 seeds: 24
+#: runs) in about 2 hours on 2 CPU cores: 1.25 M steps are 204 iterations of 256 envs,
+#: 24 x (1,253,376 / 5,000 + 40 s) = 6,980 s.
+DEFAULT_BUDGET = 1_250_000
 
 
 @dataclass
@@ -168,7 +172,12 @@ class StudyCfg:
 
     @property
     def iterations(self) -> int:
+        """PPO iterations per run: the budget, rounded up to whole iterations."""
         return max(1, math.ceil(self.budget_env_steps / (self.num_envs * STEPS_PER_ENV)))
+
+    @property
+    def env_steps_per_run(self) -> int:
+        return self.iterations * self.num_envs * STEPS_PER_ENV
 
     def command(self) -> str:
         """The `quaddance study` command line of these settings (options left at their
@@ -400,13 +409,14 @@ def run_study(cfg: StudyCfg, log: Callable[[str], None] = print) -> dict[str, An
     feasible: dict[tuple[Path, float], np.ndarray] = {}
     spent_s = 0.0
     for i, (variant, seed) in enumerate(todo):
-        left = "unknown until a run finishes"
-        if i:
-            left = f"about {_duration(spent_s / i * (len(todo) - i))}"
+        per_run_s = (
+            spent_s / i if i else cfg.env_steps_per_run / CPU_ENV_STEPS_PER_S + RUN_OVERHEAD_S
+        )
+        left = f"about {_duration(per_run_s * (len(todo) - i))}"
         log(
             f"[{i + 1}/{len(todo)}] {variant.name} seed {seed}: {variant.changes}; "
-            f"{cfg.iterations} iterations ({cfg.iterations * cfg.num_envs * STEPS_PER_ENV:,} env "
-            f"steps); study time left {left}"
+            f"{cfg.iterations} iterations ({cfg.env_steps_per_run:,} env steps); study time "
+            f"left {left}"
         )
         t0 = time.monotonic()
         trainer = train_run(cfg, variant, seed, log)
@@ -422,11 +432,11 @@ def run_study(cfg: StudyCfg, log: Callable[[str], None] = print) -> dict[str, An
     return write_report(cfg)
 
 
-#: Settings every run of one study shares: (metrics key, `StudyCfg` field, option).
+#: Settings every run of one study shares: (metrics key, `StudyCfg` field, option). Not the
+#: engine: a study begun on a CPU may go on where a GPU is lent.
 SHARED = (
     ("budget_env_steps", "budget_env_steps", "--budget"),
     ("num_envs", "num_envs", "--num-envs"),
-    ("engine", "engine", "--engine"),
     ("eval_duration_s", "eval_duration_s", "--eval-seconds"),
 )
 
@@ -524,8 +534,26 @@ def verdicts(table: dict[str, dict[str, Any]], runs: dict[str, list[dict]]) -> l
     budget``, with the numbers that decide it (`THRESHOLDS`)."""
     th = THRESHOLDS
 
-    def each(variant: str, test: Callable[[dict[str, Any]], bool]) -> list[bool]:
-        return [test(r) for r in runs.get(variant, [])]
+    def contrast(
+        claim: str,
+        rule: str,
+        pair: tuple[str, str],
+        effect: Callable[[dict[str, Any]], bool],
+        keys: tuple[str, ...],
+    ) -> dict[str, Any]:
+        """A claim that ``effect`` shows in the first variant of ``pair`` and not in the
+        second; seed by seed (holds: every seed shows it; does not hold: no seed of the first
+        shows the effect)."""
+        first = [effect(r) for r in runs.get(pair[0], [])]
+        second = [effect(r) for r in runs.get(pair[1], [])]
+        yes = [a and not b for a, b in zip(first, second, strict=False)]
+        return {
+            "claim": claim,
+            "verdict": decide(yes, [not a for a in first]),
+            "rule": rule,
+            "numbers": nums(pair, keys),
+            "figures": [f"{name}/seed1/feet.png" for name in pair],
+        }
 
     def stands_still(r: dict[str, Any]) -> bool:
         s = r["summary"]
@@ -562,22 +590,17 @@ def verdicts(table: dict[str, dict[str, Any]], runs: dict[str, list[dict]]) -> l
             parts.append(f"{v}: " + (", ".join(shown) if shown else "not run"))
         return "; ".join(parts)
 
-    out = []
     # 1. An L2 reward left the robot standing still (section 4.3.2), eq. 6 did not.
-    l2_still = each("l2", stands_still)
-    default_still = each("default", stands_still)
-    yes = [a and not b for a, b in zip(l2_still, default_still, strict=False)]
-    no = [not a for a in l2_still]
-    out.append(
-        {
-            "claim": "An L2 front reward leaves the robot standing still; eq. 6 does not.",
-            "verdict": decide(yes, no),
-            "rule": "stands still: front MAE to its own targets >= "
+    out = [
+        contrast(
+            "An L2 front reward leaves the robot standing still; eq. 6 does not.",
+            "stands still: front MAE to its own targets >= "
             f"{th['stands_still_error_fraction']} x standing still's",
-            "numbers": nums(("l2", "default"), ("mae_own_m", "standing_mae_own_m")),
-            "figures": ["curves.png", "l2/seed1/feet.png", "default/seed1/feet.png"],
-        }
-    )
+            ("l2", "default"),
+            stands_still,
+            ("mae_own_m", "standing_mae_own_m"),
+        )
+    ]
     # 2. (c_f, lambda_f) = (30, 10) is the best of Table 1's five sets.
     sets = ["default", *_TABLE1]
     errs = {v: _mean_of(table, v, "mae_feasible_m") for v in sets}
@@ -603,36 +626,27 @@ def verdicts(table: dict[str, dict[str, Any]], runs: dict[str, list[dict]]) -> l
         }
     )
     # 3. A small |c_r| lets the rear feet hop and the robot topple; c_r = -30 does not.
-    small = each("c_r-3", topples_or_hops)
-    large = each("c_r-30", topples_or_hops)
-    yes = [a and not b for a, b in zip(small, large, strict=False)]
-    no = [not a for a in small]
     out.append(
-        {
-            "claim": "With a small |c_r| (-3) the rear feet hop and the robot topples; "
+        contrast(
+            "With a small |c_r| (-3) the rear feet hop and the robot topples; "
             "c_r = -30 keeps them down (our rear-lift L1 term off in both).",
-            "verdict": decide(yes, no),
-            "rule": f"topples: falls on more than {th['topples_item_fraction']:.0%} of the "
-            f"items; hops: mean rear lift above {_cm(th['hops_rear_lift_m'])}",
-            "numbers": nums(("c_r-3", "c_r-30"), ("fall_item_fraction", "rear_lift_mean_m")),
-            "figures": ["c_r-3/seed1/feet.png", "c_r-30/seed1/feet.png"],
-        }
+            f"topples: falls on more than {th['topples_item_fraction']:.0%} of the items; "
+            f"hops: mean rear lift above {_cm(th['hops_rear_lift_m'])}",
+            ("c_r-3", "c_r-30"),
+            topples_or_hops,
+            ("fall_item_fraction", "rear_lift_mean_m"),
+        )
     )
     # 4. h0 = 0.5 keeps the front paws on the floor (reward hacking); h0 = 2 dances.
-    low = each("h0-0.5", paws_down)
-    high = each("h0-2", paws_down)
-    yes = [a and not b for a, b in zip(low, high, strict=False)]
-    no = [not a for a in low]
     out.append(
-        {
-            "claim": "Eq. 4 with h0 = 0.5 m keeps the front paws on the floor; h0 = 2 m makes "
-            "the robot lift them.",
-            "verdict": decide(yes, no),
-            "rule": "paws down: mean measured front-paw height below "
-            + _cm(th["paws_down_height_m"]),
-            "numbers": nums(("h0-0.5", "h0-2"), ("front_height_mean_m", "beat_coverage")),
-            "figures": ["h0-0.5/seed1/feet.png", "h0-2/seed1/feet.png"],
-        }
+        contrast(
+            "Eq. 4 with h0 = 0.5 m keeps the front paws on the floor; h0 = 2 m makes the robot "
+            "lift them.",
+            "paws down: mean measured front-paw height below " + _cm(th["paws_down_height_m"]),
+            ("h0-0.5", "h0-2"),
+            paws_down,
+            ("front_height_mean_m", "beat_coverage"),
+        )
     )
     return out
 
@@ -673,13 +687,17 @@ def _machine(engine: str) -> str:
 
 
 def markdown(cfg: StudyCfg, report: dict[str, Any], runs: dict[str, list[dict]]) -> str:
+    """The report's text: the settings, the thresholds, the table, the curves, the claims."""
     rel = cfg.out.name
+    finished = sum(len(seeds) for seeds in runs.values())
     th = THRESHOLDS
     lines = [
         "# The paper's study (section 4.3), repeated",
         "",
         f"Made by `{report['command']}` on {report['machine']}: each variant trained "
-        f"{cfg.budget_env_steps:,} env steps per seed, {cfg.seeds} seeds, paws only, Go1. "
+        f"{cfg.env_steps_per_run:,} env steps per seed ({cfg.iterations} PPO iterations of "
+        f"{cfg.num_envs} envs), {cfg.seeds} seeds, paws only, Go1, the rest as `quaddance "
+        f"train` makes it; {finished} of {len(VARIANTS) * cfg.seeds} runs finished. "
         "A finished run lies in "
         f"`{rel}/<variant>/seed<k>/` (policy.onnx + .json, playable with `quaddance dance "
         "--policy`; curve.csv; metrics.json; feet.png). Variants with fewer finished seeds than "

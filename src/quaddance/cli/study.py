@@ -19,7 +19,7 @@ def study_cmd(
             min=1,
             max=10**11,
         ),
-    ] = 1_400_000,  # quaddance.study.DEFAULT_BUDGET (imported lazily: torch)
+    ] = 1_250_000,  # quaddance.study.DEFAULT_BUDGET (imported lazily: torch)
     seeds: Annotated[int, typer.Option(help="Seeds per variant (1, 2, ...).", min=1, max=100)] = 2,
     only: Annotated[
         list[str] | None,
