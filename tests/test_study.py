@@ -164,8 +164,13 @@ def test_a_tiny_study_runs_skips_finished_runs_and_resumes_an_interrupted_one(
         **TINY,
         **TINY_EVAL,
     )
-    lines: list[str] = []
-    report = study.run_study(cfg, log=lambda line: lines.append(str(line)))
+    args = ["study", "--budget", "300", "--num-envs", "8", "--bank-size", "2", "--seeds", "1"]
+    args += ["--eval-items", "1", "--eval-seconds", "4", "--only", "default,h0-0.5"]
+    args += ["--out", str(cfg.out), "--work-dir", str(cfg.work)]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    assert "[1/2] default seed 1" in result.output and "study time left about" in result.output
+    report = json.loads(cfg.report.with_suffix(".json").read_text())
     for name in ("default", "h0-0.5"):
         done = cfg.out / name / "seed1"
         for file in ("policy.onnx", "policy.json", "curve.csv", "feet.png", "metrics.json"):
@@ -189,7 +194,7 @@ def test_a_tiny_study_runs_skips_finished_runs_and_resumes_an_interrupted_one(
         raise AssertionError("a finished run was trained again")
 
     monkeypatch.setattr(study, "train_run", no_training)
-    lines.clear()
+    lines: list[str] = []
     study.run_study(cfg, log=lambda line: lines.append(str(line)))
     assert sum("finished earlier, skipped" in line for line in lines) == 2
     assert {p: p.stat().st_mtime_ns for p in cfg.out.glob("*/seed1/*")} == stamps
