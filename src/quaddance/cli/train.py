@@ -54,13 +54,14 @@ def train_cmd(
         ),
     ] = "feasible",
     h0: Annotated[
-        float,
+        float | None,
         typer.Option(
             "--h0",
-            help="Eq. 4's h0, m, with --mode paper (the paper: 2; 0.5 kept the paws down).",
+            help="Eq. 4's h0, m, with --mode paper (default 2, the paper's; 0.5 kept its "
+            "paws down).",
             callback=finite_in(0.01, 10.0),
         ),
-    ] = 2.0,
+    ] = None,
     preset: Annotated[
         str, typer.Option(help="cpu (small nets, fast on 2 cores) or paper (512-256-128, GPUs).")
     ] = "cpu",
@@ -139,6 +140,8 @@ def train_cmd(
         raise typer.BadParameter(f"--reward must be one of {sets}, got {reward!r}")
     if mode not in TRAIN_MODES:
         raise typer.BadParameter(f"--mode must be one of {', '.join(TRAIN_MODES)}, got {mode!r}")
+    if h0 is not None and mode != "paper":
+        raise typer.BadParameter("--h0 scales eq. 4's targets: give it with --mode paper")
     named = [tasks.OUR_TERMS if name == "ours" else (name,) for name in without or ()]
     dropped = tuple(dict.fromkeys(name for names in named for name in names))
     known = tasks.dance_rewards(whole_body=whole_body)
@@ -173,7 +176,7 @@ def train_cmd(
         bank_size=bank_size,
         max_height_m=max_height,
         target_mode=mode,
-        h0_m=h0,
+        h0_m=TrainCfg.h0_m if h0 is None else h0,
         checkpoint_every_s=checkpoint_every,
         max_minutes=minutes,
         init_from=init_from,
