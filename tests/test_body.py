@@ -25,9 +25,8 @@ from quaddance.dancefile import Dance, load_dance, save_dance
 from quaddance.errors import InputFileError, QuaddanceError
 from quaddance.layout import BODY_COLUMNS, CHOREO_FPS
 from quaddance.pipeline import DanceSpec, make_dance, target_bank
+from quaddance.robots import GO1
 from quaddance.targets import (
-    BODY_LIMITS_FOUR_FEET,
-    BODY_LIMITS_PAW_UP,
     TargetConfig,
     feasible_body_targets,
     fit_body,
@@ -42,16 +41,16 @@ def check_limits(
 ) -> None:
     """Range (the paw-up one where ``paw_up``), speed and acceleration of body targets;
     ``rtol`` allows for float32 rounding."""
-    lo, hi = BODY_LIMITS_FOUR_FEET.low, BODY_LIMITS_FOUR_FEET.high
+    lo, hi = GO1.body_four_feet.low, GO1.body_four_feet.high
     assert np.all(body >= lo - 1e-9) and np.all(body <= hi + 1e-9)
     if paw_up is not None and paw_up.any():
         up = body[paw_up]
-        assert np.all(up >= BODY_LIMITS_PAW_UP.low - 1e-9)
-        assert np.all(up <= BODY_LIMITS_PAW_UP.high + 1e-9)
+        assert np.all(up >= GO1.body_paw_up.low - 1e-9)
+        assert np.all(up <= GO1.body_paw_up.high + 1e-9)
     vel = np.diff(body, axis=0) * fps
     acc = np.diff(vel, axis=0) * fps
-    assert np.all(np.abs(vel) <= np.array(BODY_LIMITS_FOUR_FEET.max_speed) * (1 + rtol))
-    assert np.all(np.abs(acc) <= np.array(BODY_LIMITS_FOUR_FEET.max_accel) * (1 + rtol))
+    assert np.all(np.abs(vel) <= np.array(GO1.body_four_feet.max_speed) * (1 + rtol))
+    assert np.all(np.abs(acc) <= np.array(GO1.body_four_feet.max_accel) * (1 + rtol))
 
 
 def energetic_grid(duration_s: float = 40.0, tempo_bpm: float = 120.0) -> MusicGrid:
@@ -74,12 +73,12 @@ def two_level_grid() -> MusicGrid:
 
 def test_limits_are_the_provisional_values():
     assert BODY_COLUMNS == ("height_offset_m", "roll_rad", "pitch_rad", "yaw_rad")
-    assert BODY_LIMITS_FOUR_FEET.height_offset_m == (-0.06, 0.03)
-    assert BODY_LIMITS_PAW_UP.roll_rad == 0.12
-    assert BODY_LIMITS_FOUR_FEET.max_speed[0] == 0.25
-    assert BODY_LIMITS_FOUR_FEET.max_accel[1] == 20.0
+    assert GO1.body_four_feet.height_offset_m == (-0.06, 0.03)
+    assert GO1.body_paw_up.roll_rad == 0.12
+    assert GO1.body_four_feet.max_speed[0] == 0.25
+    assert GO1.body_four_feet.max_accel[1] == 20.0
     with pytest.raises(dataclasses.FrozenInstanceError):
-        BODY_LIMITS_FOUR_FEET.roll_rad = 1.0  # type: ignore[misc]
+        GO1.body_four_feet.roll_rad = 1.0  # type: ignore[misc]
 
 
 def test_wild_body_curves_are_clamped_into_range_speed_and_accel():
@@ -159,13 +158,13 @@ def test_body_choreography_is_reproducible_and_seeded():
 def test_body_choreography_is_smooth_and_inside_the_range(tempo):
     grid = synthetic_grid(tempo, 60.0, np.random.default_rng(int(tempo)))
     body = body_for(grid, seed=2)
-    lo, hi = BODY_LIMITS_FOUR_FEET.low, BODY_LIMITS_FOUR_FEET.high
+    lo, hi = GO1.body_four_feet.low, GO1.body_four_feet.high
     assert np.all(body >= lo - 1e-9) and np.all(body <= hi + 1e-9)
     vel = np.diff(body, axis=0) * CHOREO_FPS
     acc = np.diff(vel, axis=0) * CHOREO_FPS
     # C1 and minimum-jerk shapes: bounded acceleration, within the robot's limits (the
     # lean follows the human feet, smoothed: a little more).
-    limit = np.array(BODY_LIMITS_FOUR_FEET.max_accel)
+    limit = np.array(GO1.body_four_feet.max_accel)
     assert np.all(np.abs(acc[:, [0, 2, 3]]) <= limit[[0, 2, 3]] * 1.05)
     assert np.abs(acc[:, 1]).max() < 2 * limit[1]
 

@@ -162,7 +162,6 @@ def test_done_keeps_the_policy_balancing_at_its_rest_targets_then_damps():
     crouches) for `done_stand_s`, then damping: no joint-space move to a fixed pose, which
     drags the planted feet and tilted the trunk."""
     from quaddance.pipeline import target_bank
-    from quaddance.targets import BODY_LIMITS_FOUR_FEET
 
     policy = OnnxPolicy.load(shipped_policy_path())
     cfg = SafetyCfg(
@@ -187,7 +186,7 @@ def test_done_keeps_the_policy_balancing_at_its_rest_targets_then_damps():
     rest = standing[fade + 1 :]
     np.testing.assert_array_equal(log["targets_m"][rest], 0.0)
     assert policy.task.whole_body  # the shipped policy: it crouches to its lowest trunk
-    crouch = BODY_LIMITS_FOUR_FEET.height_offset_m[0]
+    crouch = GO1.body_four_feet.height_offset_m[0]
     np.testing.assert_allclose(log["body_targets"][rest][:, 0], crouch, atol=1e-6)
     np.testing.assert_array_equal(log["body_targets"][rest][:, 1:], 0.0)
 

@@ -136,10 +136,10 @@ def test_the_trunk_keeps_its_bounds_at_seams_and_back_to_calm_after_a_lost_lock(
     (`feasible_body_targets`) at every seam, and go back to the calm pose within them when
     the lock is lost: the blend of two plans exceeded them (height speed up to 1.2 x), and a
     lost lock dropped the trunk to calm in one tick."""
-    from quaddance.targets import BODY_LIMITS_FOUR_FEET, BODY_LIMITS_PAW_UP
+    from quaddance.robots import GO1
 
-    v_max = np.minimum(BODY_LIMITS_FOUR_FEET.max_speed, BODY_LIMITS_PAW_UP.max_speed)
-    a_max = np.minimum(BODY_LIMITS_FOUR_FEET.max_accel, BODY_LIMITS_PAW_UP.max_accel)
+    v_max = np.minimum(GO1.body_four_feet.max_speed, GO1.body_paw_up.max_speed)
+    a_max = np.minimum(GO1.body_four_feet.max_accel, GO1.body_paw_up.max_accel)
     for seed in range(3):
         lc = LiveChoreographer(HZ, DanceSpec(seed=seed))
         for i in range(round(20.0 / 0.05)):

@@ -582,12 +582,12 @@ def test_bvh_moving_root_becomes_body_curves_without_drift(tmp_path):
 
     # make_dance scales them into the robot's range and keeps its limits.
     from quaddance.pipeline import make_dance
-    from quaddance.targets import BODY_LIMITS_FOUR_FEET
+    from quaddance.robots import GO1
 
     dance, _ = make_dance(None, path)
     body = dance.body_targets
-    assert np.all(body >= BODY_LIMITS_FOUR_FEET.low - 1e-9)
-    assert np.all(body <= BODY_LIMITS_FOUR_FEET.high + 1e-9)
+    assert np.all(body >= GO1.body_four_feet.low - 1e-9)
+    assert np.all(body <= GO1.body_four_feet.high + 1e-9)
     roll_50 = np.interp(dance.time_s, t, roll_deg)
     assert np.corrcoef(body[100:-100, 1], roll_50[100:-100])[0, 1] > 0.95
     assert np.ptp(body[:, 0]) > 0.04  # an 8 cm bob, scaled into the (paw-up) range

@@ -18,8 +18,14 @@ seed           () int       choreographer seed
 version        () unicode   quaddance version that wrote the file
 body_targets   (T, 4)       trunk height offset m, roll, pitch, yaw rad (format 2;
                             missing in format 1 files: read as zeros)
-format         () int       dance format: 2 (missing in format 1 files)
+robot          () unicode   the robot the dance was made for, a key of
+                            `quaddance.robots.ROBOTS` (format 3; missing in older
+                            files: read as the Go1)
+format         () int       dance format: 3 (missing in format 1 files)
 =============  ===========  =====================================================
+
+A dance is for one robot: its targets keep to that robot's limits. `load_dance` with a
+``robot`` refuses a dance made for another.
 
 `Dance.clamp_report` (what feasible mode clamped, from `quaddance.pipeline.compose`) is
 not stored.
@@ -39,6 +45,7 @@ import numpy as np
 from quaddance.errors import InputFileError
 from quaddance.fileio import atomic_path
 from quaddance.layout import MODES, N_BODY, N_PAWS
+from quaddance.robots import GO1, ROBOTS, RobotCfg, get_robot
 
 # What a damaged archive raises: zipfile and zlib errors, NotImplementedError (unknown
 # compression method), RuntimeError (encrypted member), struct.error (cut headers), and from
@@ -62,10 +69,11 @@ KEYS: tuple[str, ...] = (
     "version",
 )
 _STRING_KEYS = ("mode", "source", "version")
-#: Keys a file may lack: format 1 files (before whole-body dances) have neither.
-OPTIONAL_KEYS: tuple[str, ...] = ("body_targets", "format")
-#: Dance format written: 1 = feet only, 2 = adds ``body_targets`` (T, 4).
-FORMAT_VERSION = 2
+#: Keys a file may lack: format 1 files (before whole-body dances) have none, format 2
+#: files (before the Go2) no ``robot``.
+OPTIONAL_KEYS: tuple[str, ...] = ("body_targets", "format", "robot")
+#: Dance format written: 1 = feet only, 2 = adds ``body_targets`` (T, 4), 3 = adds ``robot``.
+FORMAT_VERSION = 3
 #: Largest |trunk height offset|, m, and |trunk angle|, rad, read from ``body_targets``.
 MAX_BODY_HEIGHT_M = 0.2
 MAX_BODY_ANGLE_RAD = 1.0
@@ -80,7 +88,7 @@ MAX_BEATS = 100_000
 """Most beats or downbeats (a 30-minute dance at 300 BPM has 9000)."""
 MAX_HEIGHT_M = 20.0
 """Largest foot height or target read, m (paper mode asks up to h0 = 10 m at most)."""
-MAX_TEXT_CHARS = {"mode": 16, "source": 1000, "version": 64}
+MAX_TEXT_CHARS = {"mode": 16, "source": 1000, "version": 64, "robot": 64}
 """Longest text of each string field, characters."""
 MAX_FILE_BYTES = 256 << 20
 """Largest dance file read, bytes (a 20-minute dance is about 3 MB)."""
@@ -103,6 +111,7 @@ class Dance:
         version: quaddance version that made it.
         body_targets: (T, 4) trunk targets relative to standing: height offset (m), roll,
             pitch, yaw (rad); `quaddance.layout.BODY_COLUMNS`. None -> zeros.
+        robot: the robot it was made for (`quaddance.robots.RobotCfg.name`).
         clamp_report: what feasible mode clamped (`compose`), or None; not saved.
     """
 
@@ -117,6 +126,7 @@ class Dance:
     seed: int
     version: str
     body_targets: np.ndarray | None = None
+    robot: str = GO1.name
     clamp_report: dict | None = None
 
     def __post_init__(self) -> None:
@@ -127,6 +137,16 @@ class Dance:
     def duration_s(self) -> float:
         """Length of the dance, s."""
         return self.time_s.size / self.fps
+
+    def require_robot(self, robot: RobotCfg, what: str) -> None:
+        """Refuse, in one line naming ``what`` (the dance file) and both robots, to dance
+        this dance on ``robot`` when it was made for another."""
+        if self.robot != robot.name:
+            mine, theirs = get_robot(self.robot).short_name, robot.short_name
+            raise InputFileError(
+                what,
+                f"a dance for {mine}, not {theirs} (choreograph it again with --robot {theirs})",
+            )
 
 
 def save_dance(path: str | Path, dance: Dance) -> None:
@@ -142,15 +162,16 @@ def save_dance(path: str | Path, dance: Dance) -> None:
         "body_targets": np.asarray(dance.body_targets, dtype=np.float64),
         "format": np.int64(FORMAT_VERSION),
     }
-    for key in _STRING_KEYS:
+    for key in (*_STRING_KEYS, "robot"):
         arrays[key] = np.array(str(getattr(dance, key)), dtype=np.str_)
     with atomic_path(path) as tmp, tmp.open("wb") as fh:
         # Writing through a handle stops numpy from appending ".npz" to the temp name.
         np.savez_compressed(fh, **arrays)
 
 
-def load_dance(path: str | Path) -> Dance:
-    """Read and check a ``dance.npz``; raise `InputFileError` naming what is wrong."""
+def load_dance(path: str | Path, robot: RobotCfg | None = None) -> Dance:
+    """Read and check a ``dance.npz``; raise `InputFileError` naming what is wrong, or, with
+    ``robot``, that the dance was made for another robot (`Dance.require_robot`)."""
     path = Path(path)
     if not path.is_file():
         raise InputFileError(path, "no such file")
@@ -171,7 +192,10 @@ def load_dance(path: str | Path) -> Dance:
     except _ARCHIVE_ERRORS as err:
         problem = " ".join(str(err).split())[:200]
         raise InputFileError(path, f"cannot read as a dance .npz ({problem})") from None
-    return _check(path, raw)
+    dance = _check(path, raw)
+    if robot is not None:
+        dance.require_robot(robot, path)
+    return dance
 
 
 def _check_headers(path: Path) -> None:
@@ -286,6 +310,11 @@ def _check(path: Path, raw: dict[str, np.ndarray]) -> Dance:
             raise InputFileError(
                 path, f"format {fmt} is not one this quaddance reads (1 to {FORMAT_VERSION})"
             )
+    robot = GO1.name
+    if "robot" in raw:
+        robot = text("robot")
+        if robot not in ROBOTS:
+            raise InputFileError(path, f"robot must be one of {', '.join(ROBOTS)}, got {robot!r}")
     body = np.zeros((n, N_BODY))
     if "body_targets" in raw:
         body = curve("body_targets", 2, -MAX_BODY_ANGLE_RAD, MAX_BODY_ANGLE_RAD)
@@ -312,4 +341,5 @@ def _check(path: Path, raw: dict[str, np.ndarray]) -> Dance:
         seed=seed,
         version=text("version"),
         body_targets=body,
+        robot=robot,
     )

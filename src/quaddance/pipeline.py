@@ -49,6 +49,7 @@ from quaddance.targets import (
 if TYPE_CHECKING:
     from quaddance.choreo.motion import HumanMotion
     from quaddance.music.analysis import Analysis
+    from quaddance.robots import RobotCfg
 
 #: Tempo range of the training bank, BPM: dance music is mostly 80-135 (AIST++ 80-130),
 #: widened so that octave errors of a beat tracker stay inside what the policy has seen.
@@ -65,8 +66,8 @@ class DanceSpec:
         seed: choreographer seed: another seed, another dance.
         moves: body moves and styles of a ``--moves`` file
             (`quaddance.choreo.moves_file.load_moves`); None: the built-in ones.
-        targets: how the human dance becomes robot targets: the mode (`mode`), the paw
-            limits, the output rate (the trunk's limits are `quaddance.targets`').
+        targets: how the human dance becomes robot targets: the robot (`robot`), whose
+            paw and trunk limits the dance keeps to, the mode (`mode`), the output rate.
     """
 
     style: str = "mixed"
@@ -85,6 +86,11 @@ class DanceSpec:
     def mode(self) -> TargetMode:
         """The target mode (`quaddance.layout.MODES`)."""
         return self.targets.mode
+
+    @property
+    def robot(self) -> RobotCfg:
+        """The robot the dance is for."""
+        return self.targets.robot
 
 
 def compose(
@@ -114,20 +120,21 @@ def compose(
         feasible_body_targets' report}`` (no ``"body"`` without ``whole_body``).
     """
     cfg = spec.targets
+    four_feet = cfg.robot.body_four_feet
     if motion is not None:
         feet_m, fps = np.asarray(motion.feet_m, dtype=np.float64), float(motion.fps)
         # Motions without a trunk (or stand-ins that carry only feet) dance with a still body.
         trunk = getattr(motion, "body", None)
-        body = fit_body(trunk) if trunk is not None else np.zeros((feet_m.shape[0], N_BODY))
+        body = (
+            fit_body(trunk, four_feet) if trunk is not None else np.zeros((feet_m.shape[0], N_BODY))
+        )
         source = motion.source if grid is None else f"{motion.source}; beats of {music_name}"
     elif grid is not None:
         fps = CHOREO_FPS
         feet_m = choreograph(grid, seed=spec.seed, fps=fps, style=spec.style, moves=spec.moves)
         body = None
         if whole_body:
-            body = choreograph_body(
-                grid, feet_m, fps, seed=spec.seed, style=spec.style, moves=spec.moves
-            )
+            body = choreograph_body(grid, feet_m, fps, spec.seed, spec.style, spec.moves, four_feet)
         source = f"choreographer (style {spec.style}, seed {spec.seed}) on {music_name}"
         if spec.moves is not None and spec.moves.source != "built-in":
             source += f", moves {spec.moves.source}"
@@ -140,9 +147,7 @@ def compose(
     report = {"paw": paw_clamp_report(feet_m, fps, targets_m, cfg)}
     body_targets = None
     if whole_body:
-        body_targets, report["body"] = feasible_body_targets(
-            body, fps, time_s, targets_m, min_lift_m=cfg.min_lift_m
-        )
+        body_targets, report["body"] = feasible_body_targets(body, fps, time_s, targets_m, cfg)
     return Dance(
         fps=cfg.out_fps,
         time_s=time_s,
@@ -155,6 +160,7 @@ def compose(
         seed=int(spec.seed),
         version=quaddance.__version__,
         body_targets=body_targets,
+        robot=cfg.robot.name,
         clamp_report=report,
     )
 

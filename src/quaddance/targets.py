@@ -29,22 +29,28 @@ from quaddance.lifts import (
     min_jerk,
     render_lifts,
 )
-from quaddance.robots import GO1, BodyLimits
+from quaddance.robots import GO1, BodyLimits, RobotCfg
 
 
 @dataclass(frozen=True)
 class TargetConfig:
-    """How human foot heights become robot front-foot targets. Heights in metres."""
+    """How human foot heights become targets for ``robot``. Heights in metres.
+
+    ``robot`` is the one source of the limits a dance keeps to: the paw height
+    (``max_height_m``, unless given) and the trunk ranges (`RobotCfg.body_four_feet`,
+    `RobotCfg.body_paw_up`). To change the robot, make a new config (``replace`` would keep
+    the old robot's ``max_height_m``).
+    """
 
     mode: TargetMode = "feasible"
     #: eq. 4's h0; 2 m gave the paper's headline result (the robot reaches about 0.5 m).
     h0_m: float = 2.0
     #: The released code's scale s on min-max normalised heights (0.2 ... 2.5 were tried).
     scale: float = 1.0
-    #: Highest front-foot target while standing on three legs: the robot's
+    #: Highest front-foot target while standing on three legs; None: the robot's
     #: (`RobotCfg.max_paw_height_m`). A policy declares the range it was trained on in its
     #: JSON, and `quaddance dance` uses that instead.
-    max_height_m: float = GO1.max_paw_height_m
+    max_height_m: float | None = None
     #: Fastest vertical foot speed asked for. Chosen below a trotting Go1's swing-foot speed
     #: (1-2 m/s) because the dancer also shifts its weight onto three legs for each lift:
     #: a 0.2 m lift then lasts about 0.75 s, a 0.1 m tap about 0.4 s.
@@ -66,8 +72,12 @@ class TargetConfig:
     beat_snap_s: float = 0.035
     #: Output rate, Hz: the policy's 50 Hz (sim dt 0.005 s x decimation 4, released code).
     out_fps: float = 50.0
+    #: The robot the targets are for.
+    robot: RobotCfg = GO1
 
     def __post_init__(self) -> None:
+        if self.max_height_m is None:
+            object.__setattr__(self, "max_height_m", self.robot.max_paw_height_m)
         if self.mode not in MODES:
             raise QuaddanceError(f"unknown target mode {self.mode!r}; choose one of {MODES}")
         positive = {
@@ -348,10 +358,6 @@ def _fit_in_time(lifts: list[_Lift], cfg: TargetConfig, end_s: float) -> list[_L
 # --- body (trunk) targets ---------------------------------------------------------------------
 
 
-#: Trunk range with all four feet on the ground, and while a front paw target is above
-#: `TargetConfig.min_lift_m`: the default robot's (`RobotCfg.body_four_feet`, `body_paw_up`).
-BODY_LIMITS_FOUR_FEET = GO1.body_four_feet
-BODY_LIMITS_PAW_UP = GO1.body_paw_up
 #: Time over which the allowed range blends between the two sets, s (before a lift starts
 #: and after it ends), so the range edges never move faster than the trunk may.
 BODY_RANGE_BLEND_S = 0.3
@@ -359,8 +365,9 @@ BODY_RANGE_BLEND_S = 0.3
 BODY_FIT_SHARE = 0.9
 
 
-def fit_body(body: np.ndarray, limits: BodyLimits = BODY_LIMITS_FOUR_FEET) -> np.ndarray:
-    """Scale human-unit body curves (T, 4) into the robot's range, column by column.
+def fit_body(body: np.ndarray, limits: BodyLimits = GO1.body_four_feet) -> np.ndarray:
+    """Scale human-unit body curves (T, 4) into the robot's four-feet range ``limits``,
+    column by column.
 
     Each column is multiplied by one gain <= 1 (never amplified), chosen so that its 98th
     percentile of |value| fills `BODY_FIT_SHARE` of the four-feet range (height: of each
@@ -472,18 +479,15 @@ def _bounded_smooth(
 
 
 def continue_body_targets(
-    body: np.ndarray,
-    sent: np.ndarray,
-    dt: float,
-    four_feet: BodyLimits = BODY_LIMITS_FOUR_FEET,
-    paw_up: BodyLimits = BODY_LIMITS_PAW_UP,
+    body: np.ndarray, sent: np.ndarray, dt: float, robot: RobotCfg = GO1
 ) -> np.ndarray:
     """(T, 4) body targets that carry on from ``sent`` (the last two rows already final,
     (2, 4)), at steps of ``dt``: each column follows ``body`` from the position and
     velocity that ``sent`` ends with, within the speed and acceleration bounds of
-    `feasible_body_targets` and the four-feet range (the causal pass of its filter). Where
-    ``body`` keeps the bounds from there, it comes out unchanged; where it would jump (a new
-    plan meeting an old one), it is caught up with as fast as the bounds allow."""
+    `feasible_body_targets` and ``robot``'s four-feet range (the causal pass of its filter).
+    Where ``body`` keeps the bounds from there, it comes out unchanged; where it would jump (a
+    new plan meeting an old one), it is caught up with as fast as the bounds allow."""
+    four_feet, paw_up = robot.body_four_feet, robot.body_paw_up
     body = np.asarray(body, dtype=np.float64)
     sent = np.asarray(sent, dtype=np.float64)
     v_max = np.minimum(four_feet.max_speed, paw_up.max_speed)
@@ -533,9 +537,7 @@ def feasible_body_targets(
     fps_in: float,
     time_s_out: np.ndarray,
     paw_targets_m: np.ndarray | None = None,
-    four_feet: BodyLimits = BODY_LIMITS_FOUR_FEET,
-    paw_up: BodyLimits = BODY_LIMITS_PAW_UP,
-    min_lift_m: float = TargetConfig.min_lift_m,
+    cfg: TargetConfig | None = None,
 ) -> tuple[np.ndarray, dict]:
     """Body curves the robot can follow, at the paw targets' times.
 
@@ -544,9 +546,11 @@ def feasible_body_targets(
             sampled at ``fps_in`` Hz from t = 0.
         time_s_out: (T,) output times, s (those of the paw targets).
         paw_targets_m: (T, 4) paw targets at ``time_s_out``; where a front one is above
-            ``min_lift_m`` the ``paw_up`` range applies, blended over `BODY_RANGE_BLEND_S`.
-        four_feet, paw_up: the two ranges; speed and acceleration bounds come from the
-            tighter of the two.
+            ``cfg.min_lift_m`` the robot's paw-up range applies, blended over
+            `BODY_RANGE_BLEND_S`; elsewhere its four-feet range.
+        cfg: the targets' settings (default `TargetConfig()`): its robot's two ranges
+            (`RobotCfg.body_four_feet`, `RobotCfg.body_paw_up`); speed and acceleration
+            bounds come from the tighter of the two.
 
     Rules, in order: resample linearly; clamp each sample to the range at its time; limit
     speed and acceleration (forward-backward, zero net lag) while staying inside the
@@ -558,6 +562,8 @@ def feasible_body_targets(
         "max": largest change, "mean": mean change over all samples}`` in the column's
         units, and ``"samples"``: T.
     """
+    cfg = cfg or TargetConfig()
+    four_feet, paw_up = cfg.robot.body_four_feet, cfg.robot.body_paw_up
     body = np.asarray(body, dtype=np.float64)
     t_out = np.asarray(time_s_out, dtype=np.float64)
     if body.ndim != 2 or body.shape[1] != 4:
@@ -569,7 +575,7 @@ def feasible_body_targets(
     n = t_out.size
     empty = body.shape[0] == 0 or n == 0
     wanted = np.zeros((n, 4)) if empty else resample(body, fps_in, t_out)
-    weight = _paw_up_weight(t_out, paw_targets_m, min_lift_m)[:, None]
+    weight = _paw_up_weight(t_out, paw_targets_m, cfg.min_lift_m)[:, None]
     low = (1 - weight) * four_feet.low + weight * paw_up.low
     high = (1 - weight) * four_feet.high + weight * paw_up.high
     v_max = np.minimum(four_feet.max_speed, paw_up.max_speed)

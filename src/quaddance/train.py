@@ -68,7 +68,7 @@ class TrainCfg:
     resume: bool = False
     bank_size: int = 256
     bank_duration_s: float = 32.0
-    max_height_m: float | None = None  # feasible target bound; None: targets' default
+    max_height_m: float | None = None  # feasible target bound; None: the robot's
     # How the bank's human dances become paw targets: "feasible", or "paper" (eq. 4,
     # h0_m * h / max(h), the paper's study of h0 in section 4.3.3).
     target_mode: str = "feasible"
@@ -204,8 +204,12 @@ def _target_cfg(cfg: TrainCfg):
         raise QuaddanceError(
             f"unknown training target mode {cfg.target_mode!r}: use {', '.join(TRAIN_MODES)}"
         )
-    bound = {} if cfg.max_height_m is None else {"max_height_m": cfg.max_height_m}
-    return TargetConfig(mode=cfg.target_mode, h0_m=cfg.h0_m, **bound)
+    return TargetConfig(
+        mode=cfg.target_mode,
+        h0_m=cfg.h0_m,
+        max_height_m=cfg.max_height_m,
+        robot=cfg.task.scene.robot,
+    )
 
 
 def targets_record(cfg: TrainCfg, bank: np.ndarray) -> dict:

@@ -37,8 +37,7 @@ from quaddance.choreo.grid import MusicGrid, _moving_average
 from quaddance.errors import QuaddanceError
 from quaddance.layout import BODY_COLUMNS
 from quaddance.lifts import MIN_JERK_PEAK_ACCEL, MIN_JERK_PEAK_SPEED, min_jerk
-from quaddance.robots import BodyLimits
-from quaddance.targets import BODY_LIMITS_FOUR_FEET
+from quaddance.robots import GO1, BodyLimits
 
 #: Amplitude factor on a downbeat ("one" gets a bigger gesture).
 DOWNBEAT_BOOST = 1.3
@@ -292,9 +291,10 @@ def _accent_factors(grid: MusicGrid, period_s: np.ndarray) -> np.ndarray:
 def body_keys(
     grid: MusicGrid,
     plan: list[tuple[int, BodyMove]],
-    limits: BodyLimits = BODY_LIMITS_FOUR_FEET,
+    limits: BodyLimits = GO1.body_four_feet,
 ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Keyframes (times s, values) of each of the 4 columns for a plan of body moves."""
+    """Keyframes (times s, values) of each of the 4 columns for a plan of body moves,
+    within the robot's four-feet range ``limits``."""
     beats_s = grid.beats_s
     n_beats = beats_s.size
     period_s = np.diff(beats_s) if n_beats > 1 else np.ones(1)
@@ -351,6 +351,7 @@ def choreograph_body(
     seed: int = 0,
     style: str = "mixed",
     moves: MoveSet | None = None,
+    limits: BodyLimits = GO1.body_four_feet,
 ) -> np.ndarray:
     """Body motion for ``grid``: (T, 4) = `BODY_COLUMNS` at ``fps`` Hz from t = 0,
     T = ceil(duration_s * fps) (the frames of `choreograph`).
@@ -358,7 +359,8 @@ def choreograph_body(
     ``feet_m`` (T, 2) are the dance's human foot heights (from `choreograph` with the same
     fps), used for the lean away from a lifted foot; None: no lean. Deterministic for a
     given (grid, seed, style, moves). The values are in robot units and mostly inside the
-    four-feet range; `quaddance.targets.feasible_body_targets` makes them exact.
+    robot's four-feet range ``limits``; `quaddance.targets.feasible_body_targets` makes them
+    exact.
     """
     if not fps > 0:
         raise QuaddanceError(f"fps must be > 0, got {fps}")
@@ -367,7 +369,7 @@ def choreograph_body(
     plan = plan_body(grid, seed=seed, style=style, moves=moves)
     body = np.zeros((n_frames, 4))
     if plan:
-        for c, (kt, kv) in enumerate(body_keys(grid, plan)):
+        for c, (kt, kv) in enumerate(body_keys(grid, plan, limits)):
             body[:, c] = render_keys(t_s, kt, kv)
     if feet_m is not None:
         feet = np.asarray(feet_m, dtype=np.float64)

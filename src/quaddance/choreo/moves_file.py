@@ -17,8 +17,8 @@ Format (every key optional except a move's ``gestures``)::
     run = 2.0                      # a paw move of quaddance.choreo.choreographer.MOVES
 
 Columns are `quaddance.layout.BODY_COLUMNS`; amplitudes are in robot units (m, rad) and
-must lie inside the robot's four-feet range (`BODY_LIMITS_FOUR_FEET`). Every error is one
-line naming the file and the problem.
+must lie inside the robot's four-feet range (`RobotCfg.body_four_feet` of the robot the
+dance is for). Every error is one line naming the file and the problem.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from quaddance.choreo.body import BODY_MOVES, BODY_STYLES, SHAPES, BodyMove, Ges
 from quaddance.choreo.choreographer import MOVES
 from quaddance.errors import InputFileError
 from quaddance.layout import BODY_COLUMNS
-from quaddance.targets import BODY_LIMITS_FOUR_FEET
+from quaddance.robots import GO1, BodyLimits
 
 MAX_MOVES_FILE_BYTES = 1 << 20
 MAX_MOVES = 200
@@ -61,7 +61,7 @@ def _known_keys(path: Path, where: str, raw: dict, allowed: set[str]) -> None:
         )
 
 
-def _gesture(path: Path, where: str, raw: Any) -> Gesture:
+def _gesture(path: Path, where: str, raw: Any, limits: BodyLimits) -> Gesture:
     if not isinstance(raw, dict):
         raise InputFileError(path, f"{where} must be a table {{column = ..., amplitude = ...}}")
     _known_keys(path, where, raw, _GESTURE_KEYS)
@@ -74,7 +74,7 @@ def _gesture(path: Path, where: str, raw: Any) -> Gesture:
             path, f"{where}: unknown column {column!r}; one of {', '.join(BODY_COLUMNS)}"
         )
     c = BODY_COLUMNS.index(column)
-    lo, hi = BODY_LIMITS_FOUR_FEET.low[c], BODY_LIMITS_FOUR_FEET.high[c]
+    lo, hi = limits.low[c], limits.high[c]
     amplitude = _number(path, f"{where}.amplitude", raw["amplitude"], -1e9, 1e9)
     # A swing goes to both sides; a dip only to the amplitude's side.
     reach = (
@@ -96,7 +96,7 @@ def _gesture(path: Path, where: str, raw: Any) -> Gesture:
     return Gesture(column, amplitude, every, shape, width)
 
 
-def _move(path: Path, name: str, raw: Any) -> BodyMove:
+def _move(path: Path, name: str, raw: Any, limits: BodyLimits) -> BodyMove:
     where = f"moves.{name}"
     if not isinstance(raw, dict):
         raise InputFileError(path, f"{where} must be a table")
@@ -112,15 +112,18 @@ def _move(path: Path, name: str, raw: Any) -> BodyMove:
     return BodyMove(
         name=name,
         n_beats=int(n_beats),
-        gestures=tuple(_gesture(path, f"{where}.gestures[{k}]", g) for k, g in enumerate(gestures)),
+        gestures=tuple(
+            _gesture(path, f"{where}.gestures[{k}]", g, limits) for k, g in enumerate(gestures)
+        ),
         weight_quiet=_number(path, f"{where}.weight_quiet", raw.get("weight_quiet", 1.0), 0, 1e3),
         weight_loud=_number(path, f"{where}.weight_loud", raw.get("weight_loud", 1.0), 0, 1e3),
     )
 
 
-def load_moves(path: str | Path) -> MoveSet:
+def load_moves(path: str | Path, limits: BodyLimits = GO1.body_four_feet) -> MoveSet:
     """Read a moves file: the built-in body moves plus (or replaced by) the file's, and the
-    file's styles. Raise `InputFileError` (one line) for anything wrong."""
+    file's styles; amplitudes within ``limits`` (the four-feet range of the robot the dance
+    is for). Raise `InputFileError` (one line) for anything wrong."""
     path = Path(path)
     if not path.is_file():
         raise InputFileError(path, "no such file")
@@ -144,7 +147,7 @@ def load_moves(path: str | Path) -> MoveSet:
         raise InputFileError(path, "'moves' and 'styles' must be tables")
     if len(raw_moves) > MAX_MOVES:
         raise InputFileError(path, f"{len(raw_moves)} moves, at most {MAX_MOVES}")
-    new = {name: _move(path, name, raw) for name, raw in raw_moves.items()}
+    new = {name: _move(path, name, raw, limits) for name, raw in raw_moves.items()}
     body_moves = tuple(new.pop(m.name, m) for m in BODY_MOVES) + tuple(new.values())
 
     known = {m.name for m in body_moves} | {m.name for m in MOVES}

@@ -1,5 +1,6 @@
 """The options that choose a dance (``--mode``, ``--style``, ``--seed``, ``--moves``), the
-same in choreograph, dance, deploy and live, and the `DanceSpec` they make."""
+same in choreograph, dance, deploy and live, and the `DanceSpec` they make (for the robot
+that ``--robot`` or the policy names, `policy_dance_spec`)."""
 
 from __future__ import annotations
 
@@ -37,18 +38,31 @@ MovesOpt = Annotated[
 def dance_spec(
     mode: str, style: str, seed: int, moves: Path | None, targets: TargetConfig | None = None
 ) -> DanceSpec:
-    """The `DanceSpec` of the dance options, with ``targets``' other settings. The moves
-    file is read here, so that a bad one fails before any work."""
+    """The `DanceSpec` of the dance options, with ``targets``' other settings (its robot
+    among them). The moves file is read here, against that robot's trunk range, so that a
+    bad one fails before any work."""
     from quaddance.layout import MODES
     from quaddance.pipeline import DanceSpec
     from quaddance.targets import TargetConfig
 
     if mode not in MODES:
         raise typer.BadParameter(f"--mode must be one of {', '.join(MODES)}, got {mode!r}")
+    targets = dataclasses.replace(targets or TargetConfig(), mode=mode)
     move_set = None
     if moves is not None:
         from quaddance.choreo.moves_file import load_moves
 
-        move_set = load_moves(moves)
-    targets = dataclasses.replace(targets or TargetConfig(), mode=mode)
+        move_set = load_moves(moves, targets.robot.body_four_feet)
     return DanceSpec(style=style, seed=seed, moves=move_set, targets=targets)
+
+
+def policy_dance_spec(
+    robot: str | None, policy: Path | None, mode: str, style: str, seed: int, moves: Path | None
+) -> tuple[DanceSpec, Path]:
+    """The `DanceSpec` of the dance options for the robot of ``--robot`` and ``--policy``,
+    and the policy file (`quaddance.play.policy.choose_policy`)."""
+    from quaddance.play.policy import choose_policy
+    from quaddance.targets import TargetConfig
+
+    robot_cfg, path = choose_policy(robot, policy)
+    return dance_spec(mode, style, seed, moves, TargetConfig(robot=robot_cfg)), path

@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
 from quaddance.cli._dance_spec import ModeOpt, MovesOpt, SeedOpt, StyleOpt, dance_spec
-from quaddance.cli.options import finite_in
+from quaddance.cli.options import RobotModelOpt, finite_in
 
 
 def choreograph_cmd(
@@ -36,13 +35,14 @@ def choreograph_cmd(
     max_height: Annotated[
         float | None,
         typer.Option(
-            help="feasible mode: highest front-foot target, m (default 0.30, measured).",
+            help="feasible mode: highest front-foot target, m (default: the robot's, measured).",
             callback=finite_in(0.01, 1.0),
         ),
     ] = None,
     seed: SeedOpt = 0,
     style: StyleOpt = "mixed",
     moves: MovesOpt = None,
+    robot: RobotModelOpt = "go1",
     check: Annotated[
         bool,
         typer.Option(
@@ -50,17 +50,17 @@ def choreograph_cmd(
         ),
     ] = False,
 ) -> None:
-    """Turn a song (or a human motion file) into robot foot-height and body targets, dance.npz."""
+    """Turn a song (or a human motion file) into foot-height and body targets for a robot
+    (--robot), dance.npz."""
     from rich.console import Console
 
     from quaddance.pipeline import ChoreographJob, clamp_table, dance_table, run_choreograph
+    from quaddance.robots import get_robot
     from quaddance.targets import TargetConfig
 
     if song is None and motion is None:
         raise typer.BadParameter("give a SONG, or --motion FILE (or both)")
-    targets = TargetConfig(h0_m=h0, scale=scale)
-    if max_height is not None:
-        targets = dataclasses.replace(targets, max_height_m=max_height)
+    targets = TargetConfig(h0_m=h0, scale=scale, max_height_m=max_height, robot=get_robot(robot))
     spec = dance_spec(mode, style, seed, moves, targets)
     job = ChoreographJob(song=song, motion=motion, out=out, spec=spec, check=check)
     with Console(stderr=True).status("Analysing the music and choreographing..."):

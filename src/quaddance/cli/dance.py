@@ -1,4 +1,4 @@
-"""The ``dance`` command: a song -> the Go1 dancing in simulation (video, plots, metrics)."""
+"""The ``dance`` command: a song -> a robot dancing in simulation (video, plots, metrics)."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ from typing import Annotated, Any
 
 import typer
 
-from quaddance.cli._dance_spec import ModeOpt, MovesOpt, SeedOpt, StyleOpt, dance_spec
+from quaddance.cli._dance_spec import ModeOpt, MovesOpt, SeedOpt, StyleOpt, policy_dance_spec
 from quaddance.cli._exit import exit_without_teardown
-from quaddance.cli.options import PolicyOpt
+from quaddance.cli.options import PolicyOpt, PolicyRobotOpt
 
 
 def dance_cmd(
@@ -22,6 +22,7 @@ def dance_cmd(
         Path | None, typer.Option(help="Human motion (EDGE/AIST++ .pkl, .bvh) instead of ours.")
     ] = None,
     policy: PolicyOpt = None,
+    robot: PolicyRobotOpt = None,
     mode: ModeOpt = "feasible",
     seed: SeedOpt = 0,
     out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")] = Path("dance_out"),
@@ -32,14 +33,14 @@ def dance_cmd(
     style: StyleOpt = "mixed",
     moves: MovesOpt = None,
 ) -> None:
-    """Make the Go1 dance to a song: dance.mp4 (with the music), feet.png, metrics.json,
-    dance.npz and rollout.npz."""
+    """Make a robot (the Go1 unless --robot or --policy says otherwise) dance to a song:
+    dance.mp4 (with the music), feet.png, metrics.json, dance.npz and rollout.npz."""
     from rich.console import Console
 
     from quaddance.play.dance import DanceJob, run_dance
     from quaddance.play.metrics import summary_table
 
-    spec = dance_spec(mode, style, seed, moves)
+    spec, policy = policy_dance_spec(robot, policy, mode, style, seed, moves)
     if demo:
         if song is not None:
             raise typer.BadParameter("give a SONG or --demo, not both")

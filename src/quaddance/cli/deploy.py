@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from quaddance.cli._dance_spec import ModeOpt, MovesOpt, SeedOpt, StyleOpt, dance_spec
+from quaddance.cli._dance_spec import ModeOpt, MovesOpt, SeedOpt, StyleOpt, policy_dance_spec
 from quaddance.cli.options import PolicyOpt, PowerLevelOpt, RobotIpOpt, RobotOpt, finite_in
 
 
@@ -62,6 +62,8 @@ def deploy_cmd(
         summary_line,
     )
 
+    # The robot model is the policy's (``--robot`` here names the backend).
+    spec, policy = policy_dance_spec(None, policy, mode, style, seed, moves)
     console = Console(stderr=True)
     job = DeployJob(
         out_dir=out,
@@ -69,7 +71,7 @@ def deploy_cmd(
         motion=motion,
         dance=dance,
         demo=demo,
-        spec=dance_spec(mode, style, seed, moves),
+        spec=spec,
         policy=policy,
         seconds=seconds,
         auto_start=auto_start,

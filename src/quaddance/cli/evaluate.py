@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from quaddance.cli.options import SEED_MAX, PolicyOpt
+from quaddance.cli.options import SEED_MAX, PolicyOpt, PolicyRobotOpt
 
 
 def eval_cmd(
@@ -19,6 +19,7 @@ def eval_cmd(
         "report.md"
     ),
     policy: PolicyOpt = None,
+    robot: PolicyRobotOpt = None,
     held_out: Annotated[
         Path | None,
         typer.Option(help="Write held-out set --set into this folder and evaluate it."),
@@ -64,12 +65,14 @@ def eval_cmd(
 
     from quaddance.play.evaluate import EvalSettings, collect_items, evaluate, summary_line
     from quaddance.play.heldout import HELD_OUT_SETS, write_held_out_set
+    from quaddance.play.policy import choose_policy
     from quaddance.play.rollout import POLICY_OUTPUTS
 
     if held_out_set not in HELD_OUT_SETS:
         raise typer.BadParameter(f"--set must be one of {', '.join(HELD_OUT_SETS)}")
     if policy_output not in POLICY_OUTPUTS:
         raise typer.BadParameter(f"--policy-output must be one of {', '.join(POLICY_OUTPUTS)}")
+    _, policy = choose_policy(robot, policy)
     paths = list(items or [])
     if held_out is not None:
         paths += write_held_out_set(held_out, held_out_set)

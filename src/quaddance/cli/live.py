@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from quaddance.cli._dance_spec import ModeOpt, MovesOpt, SeedOpt, StyleOpt, dance_spec
+from quaddance.cli._dance_spec import ModeOpt, MovesOpt, SeedOpt, StyleOpt, policy_dance_spec
 from quaddance.cli.options import PolicyOpt, PowerLevelOpt, RobotIpOpt, RobotOpt, finite_in
 
 
@@ -66,6 +66,8 @@ def live_cmd(
     from quaddance.deploy.job import BackendOptions
     from quaddance.live.session import LiveJob, run_live, summary_line
 
+    # The robot model is the policy's (``--robot`` here names the backend).
+    spec, policy = policy_dance_spec(None, policy, mode, style, seed, moves)
     console = Console(stderr=True)
     job = LiveJob(
         out_dir=out,
@@ -79,7 +81,7 @@ def live_cmd(
         host=host,
         port=port,
         video=video,
-        spec=dance_spec(mode, style, seed, moves),
+        spec=spec,
     )
     summary, paths = run_live(job, status=lambda msg: console.log(msg))
     console.print(summary_line(summary))

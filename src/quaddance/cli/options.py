@@ -24,6 +24,14 @@ RobotOpt = Annotated[
 RobotModelOpt = Annotated[
     str, typer.Option("--robot", help="Robot model: go1 or go2 (its limits and policy).")
 ]
+PolicyRobotOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--robot",
+        help="Robot model: go1 or go2 (its model, limits and shipped policy); default: "
+        "--policy's robot, else go1.",
+    ),
+]
 RobotIpOpt = Annotated[str, typer.Option(help="go1: the robot's low-level IP.")]
 PowerLevelOpt = Annotated[
     int, typer.Option(help="go1: SDK PowerProtect level, 1 (10 %) to 10.", min=1, max=10)

@@ -12,6 +12,7 @@ from quaddance.errors import InputFileError, QuaddanceError
 from quaddance.layout import FRONT_PAWS
 from quaddance.pipeline import DanceSpec, make_dance
 from quaddance.robots import RobotCfg
+from quaddance.targets import TargetConfig
 
 ROBOTS: tuple[str, ...] = ("sim", "go1")
 
@@ -80,9 +81,10 @@ class DeployJob:
     motion: Path | None = None
     dance: Path | None = None  #: a ready dance.npz
     demo: bool = False
-    #: which dance to make of the song or motion; its paw targets: the policy's range
+    #: which dance to make of the song or motion (for the policy's robot); its paw
+    #: targets: the policy's range
     spec: DanceSpec = field(default_factory=DanceSpec)
-    policy: Path | None = None
+    policy: Path | None = None  #: None: the shipped policy of the spec's robot
     seconds: float | None = None
     auto_start: bool = False
     inject: list[tuple[str, float]] = field(default_factory=list)
@@ -101,7 +103,7 @@ def run_deploy(job: DeployJob, status: Callable[[str], None] = lambda m: None) -
     n_sources = (job.song is not None) + job.demo + (job.dance is not None)
     if n_sources > 1 or (job.dance and job.motion) or (n_sources == 0 and job.motion is None):
         raise QuaddanceError("give one of SONG, --demo, --dance FILE or --motion FILE")
-    if job.dance is not None and job.spec != DanceSpec():
+    if job.dance is not None and job.spec != DanceSpec(targets=TargetConfig(robot=job.spec.robot)):
         raise QuaddanceError(
             "--dance FILE is a dance already: --mode, --style, --moves and "
             "--seed choose the dance of a SONG, --demo or --motion"
@@ -114,7 +116,8 @@ def run_deploy(job: DeployJob, status: Callable[[str], None] = lambda m: None) -
     for path in (job.song, job.motion, job.dance):
         if path is not None and not Path(path).is_file():
             raise InputFileError(path, "no such file")
-    policy = OnnxPolicy.load(job.policy or shipped_policy_path())
+    policy = OnnxPolicy.load(job.policy or shipped_policy_path(job.spec.robot))
+    spec = spec_for_policy(job.spec, policy)
     out = ensure_dir(job.out_dir)
     for name in ("deploy.json", "log.npz", "rollout.npz"):
         check_output_file(out / name)  # refuse a FIFO or a folder before the robot moves
@@ -127,10 +130,10 @@ def run_deploy(job: DeployJob, status: Callable[[str], None] = lambda m: None) -
             song = Path(tmp) / "demo_song.wav"
             write_demo_song(song)
         if job.dance is not None:
-            dance = load_dance(job.dance)
+            dance = load_dance(job.dance, policy.robot)
         else:
             status("analysing the music and choreographing")
-            dance, _ = make_dance(song, job.motion, spec_for_policy(job.spec, policy))
+            dance, _ = make_dance(song, job.motion, spec)
         if abs(dance.fps - policy.task.policy_hz) > 1e-6:
             raise InputFileError(
                 job.dance or song or job.motion,

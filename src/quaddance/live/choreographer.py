@@ -200,7 +200,7 @@ class LiveChoreographer:
             # The trunk keeps the offline targets' speed and acceleration bounds across the
             # seam, and when a lost lock sends it back to the calm pose.
             sent = self.rows[start - 2 : start, BODY]
-            new[:, BODY] = continue_body_targets(new[:, BODY], sent, 1.0 / self.hz)
+            new[:, BODY] = continue_body_targets(new[:, BODY], sent, 1.0 / self.hz, self.cfg.robot)
         self.rows = np.concatenate([self.rows[:start], new], axis=0)
         _one_paw_at_a_time(self.rows, start, round(self.cfg.min_ground_s * self.hz))
 

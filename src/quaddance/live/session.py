@@ -225,7 +225,8 @@ def run_live(job: LiveJob, status=lambda msg: None) -> tuple[dict, dict[str, Pat
     if job.seconds is not None and not (np.isfinite(job.seconds) and job.seconds > 0):
         raise QuaddanceError(f"--seconds must be > 0, got {job.seconds}")
     job.backend.check()
-    policy = OnnxPolicy.load(job.policy or shipped_policy_path())
+    policy = OnnxPolicy.load(job.policy or shipped_policy_path(job.spec.robot))
+    dance_spec = spec_for_policy(job.spec, policy)
     out = ensure_dir(job.out_dir)
     names = ["live.json", "deploy.json", "log.npz", "rollout.npz"] + ["dance.mp4"] * job.video
     for name in names:
@@ -238,7 +239,7 @@ def run_live(job: LiveJob, status=lambda msg: None) -> tuple[dict, dict[str, Pat
         "start_s": job.start_s,
         "device": job.device,
         "policy_hz": policy.task.policy_hz,
-        "dance": spec_for_policy(job.spec, policy),
+        "dance": dance_spec,
     }
     status("opening the audio input and loading the beat tracker")
     listener = ctx.Process(target=_listen, args=(spec, updates, go, stop), daemon=True)

@@ -1,4 +1,4 @@
-"""The main job: a song (or a motion file) in, the Go1 dancing to it out.
+"""The main job: a song (or a motion file) in, the robot (`DanceSpec.robot`) dancing to it out.
 
 song -> analysis -> choreography -> targets -> closed-loop rollout of the ONNX policy on the
 cpu engine -> dance.mp4 (with the song), feet.png (the paper's Fig. 4), metrics.json.
@@ -31,7 +31,7 @@ class DanceJob:
     out_dir: Path
     song: Path | None = None
     motion: Path | None = None
-    policy: Path | None = None  # None: the shipped policy
+    policy: Path | None = None  # None: the shipped policy of the spec's robot
     # Which dance; its paw targets are put in the policy's range (`spec_for_policy`).
     spec: DanceSpec = field(default_factory=DanceSpec)
     video: bool = True
@@ -64,7 +64,9 @@ def trained_max_height_m(policy: OnnxPolicy) -> float | None:
 
 def spec_for_policy(spec: DanceSpec, policy: OnnxPolicy) -> DanceSpec:
     """``spec`` with its paw targets in the range the policy was trained on (its JSON); a
-    policy trained on eq. 4 targets dances eq. 4 targets with its h0, the only kind it saw."""
+    policy trained on eq. 4 targets dances eq. 4 targets with its h0, the only kind it saw.
+    One line if the dance is for another robot than the policy."""
+    policy.require_robot(spec.robot, "the dance's robot")
     trained = policy.meta.get("targets", {})
     changes: dict[str, Any] = {}
     if trained.get("max_height_m") is not None:
@@ -78,11 +80,9 @@ def spec_for_policy(spec: DanceSpec, policy: OnnxPolicy) -> DanceSpec:
 
 def feasible_max_height_m(policy: OnnxPolicy) -> float:
     """The paw height up to which the policy's feasible targets reach: its trained range, or
-    `TargetConfig`'s default."""
-    from quaddance.targets import TargetConfig
-
+    its robot's (`RobotCfg.max_paw_height_m`)."""
     max_h = trained_max_height_m(policy)
-    return TargetConfig().max_height_m if max_h is None else max_h
+    return policy.robot.max_paw_height_m if max_h is None else max_h
 
 
 def run_dance(
@@ -105,9 +105,10 @@ def run_dance(
             return _run_dance(
                 job, None, pending, t_start, status, sim_progress, show_render_progress
             )
-        from quaddance.play.video import VideoRenderer
+        from quaddance.play.video import RenderCfg, VideoRenderer
 
-        with VideoRenderer(None, job.width, job.height) as renderer:
+        cfg = RenderCfg(robot=job.spec.robot)
+        with VideoRenderer(None, job.width, job.height, cfg=cfg) as renderer:
             return _run_dance(
                 job, renderer, pending, t_start, status, sim_progress, show_render_progress
             )
@@ -194,8 +195,9 @@ def _run_dance(
     for path in (job.song, job.motion):
         if path is not None and not Path(path).is_file():
             raise InputFileError(path, "no such file")
-    policy_path = job.policy or shipped_policy_path()
+    policy_path = job.policy or shipped_policy_path(job.spec.robot)
     policy = OnnxPolicy.load(policy_path)
+    spec = spec_for_policy(job.spec, policy)
     out = ensure_dir(job.out_dir)
     for name in ("dance.npz", "rollout.npz", "feet.png", "metrics.json", "dance.mp4"):
         check_output_file(out / name)  # refuse a FIFO or device before the work, not after
@@ -212,7 +214,7 @@ def _run_dance(
             from quaddance.play.plots import preload
 
             preload()
-    how = dict(song=job.song, motion=job.motion, spec=spec_for_policy(job.spec, policy))
+    how = dict(song=job.song, motion=job.motion, spec=spec)
     dance = None
     if pending is not None and (analysis := pending.analysis()) is not None:
         dance = pending.run(_make_dance, analysis=analysis, **how)

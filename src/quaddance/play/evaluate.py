@@ -84,13 +84,17 @@ def evaluate_items(
     settings: EvalSettings = EvalSettings(),
     progress: Callable[[int, int, str], None] | None = None,
 ) -> list[dict[str, Any]]:
-    """Dance each item without video; one row per item: ``name`` + every key of its
-    metrics.json."""
+    """Dance each item without video on the policy's robot (``policy`` None: the shipped
+    Go1 policy); one row per item: ``name`` + every key of its metrics.json."""
     import tempfile
 
     from quaddance.pipeline import DanceSpec
     from quaddance.play.dance import DanceJob, run_dance
+    from quaddance.play.policy import choose_policy
     from quaddance.targets import TargetConfig
+
+    robot, policy = choose_policy(None, policy)
+    spec = DanceSpec(seed=settings.seed, targets=TargetConfig(mode=settings.mode, robot=robot))
 
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -103,7 +107,7 @@ def evaluate_items(
                 song=None if is_motion else item,
                 motion=item if is_motion else None,
                 policy=policy,
-                spec=DanceSpec(seed=settings.seed, targets=TargetConfig(mode=settings.mode)),
+                spec=spec,
                 video=False,
                 randomize=settings.randomize,
                 # One draw of the dynamics per item, not the same robot for every item.

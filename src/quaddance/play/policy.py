@@ -8,15 +8,54 @@ from pathlib import Path
 
 import numpy as np
 
-from quaddance.errors import InputFileError
+from quaddance.errors import InputFileError, QuaddanceError
 from quaddance.play.policy_spec import PolicySpec
-from quaddance.robots import GO1, RobotCfg
+from quaddance.robots import GO1, RobotCfg, get_robot
 from quaddance.sim.config import DanceTaskCfg
 
 
 def shipped_policy_path(robot: RobotCfg = GO1) -> Path:
-    """The policy for ``robot`` that ships with the package (trained with `quaddance train`)."""
-    return Path(str(resources.files("quaddance") / "data" / "policies" / robot.policy))
+    """The policy for ``robot`` that ships with the package (trained with `quaddance train`);
+    one line naming the robot and the path where the package has none."""
+    path = Path(str(resources.files("quaddance") / "data" / "policies" / robot.policy))
+    if not path.is_file():
+        raise QuaddanceError(
+            f"no {robot.short_name} policy ships with this quaddance ({path} is missing); "
+            "give one with --policy"
+        )
+    return path
+
+
+def choose_policy(robot: str | None, policy: Path | None) -> tuple[RobotCfg, Path]:
+    """The robot and the policy file of ``--robot`` and ``--policy``: without a policy, the
+    robot's shipped one (the Go1's when neither is given); with a policy alone, the robot
+    its JSON names; with both, they must agree (else one line naming both)."""
+    if policy is None:
+        cfg = GO1 if robot is None else get_robot(robot)
+        return cfg, shipped_policy_path(cfg)
+    own = get_robot(_read_spec(Path(policy)).robot)
+    if robot is not None:
+        require_robot(own, Path(policy), get_robot(robot), f"--robot {robot}")
+    return own, Path(policy)
+
+
+def require_robot(own: RobotCfg, path: Path, robot: RobotCfg, asked_by: str) -> None:
+    """Refuse, in one line, to run the policy at ``path`` (trained for ``own``) on ``robot``,
+    which ``asked_by`` chose, when the two differ."""
+    if own.name != robot.name:
+        raise InputFileError(
+            path, f"a policy for {own.short_name}, not for {robot.short_name} ({asked_by})"
+        )
+
+
+def _read_spec(onnx_path: Path) -> PolicySpec:
+    """The checked JSON contract beside ``onnx_path`` (both files must be there)."""
+    json_path = onnx_path.with_suffix(".json")
+    if not onnx_path.is_file():
+        raise InputFileError(onnx_path, "no such policy file")
+    if not json_path.is_file():
+        raise InputFileError(json_path, "missing: a policy needs its JSON beside the .onnx")
+    return PolicySpec.load(json_path)
 
 
 @dataclass
@@ -34,12 +73,7 @@ class OnnxPolicy:
     @classmethod
     def load(cls, onnx_path: str | Path) -> OnnxPolicy:
         onnx_path = Path(onnx_path)
-        json_path = onnx_path.with_suffix(".json")
-        if not onnx_path.is_file():
-            raise InputFileError(onnx_path, "no such policy file")
-        if not json_path.is_file():
-            raise InputFileError(json_path, "missing: a policy needs its JSON beside the .onnx")
-        spec = PolicySpec.load(json_path)
+        spec = _read_spec(onnx_path)
         obs_dim = spec.obs_dim
         import onnxruntime as ort
 
@@ -59,6 +93,16 @@ class OnnxPolicy:
         policy._session = session
         policy._input = inp.name
         return policy
+
+    @property
+    def robot(self) -> RobotCfg:
+        """The robot the policy was trained for (its JSON's ``robot``)."""
+        return self.task.scene.robot
+
+    def require_robot(self, robot: RobotCfg, asked_by: str) -> None:
+        """Refuse, in one line, to run this policy on ``robot`` (which ``asked_by`` chose)
+        when it was trained for another (`require_robot`)."""
+        require_robot(self.robot, self.onnx_path, robot, asked_by)
 
     @property
     def obs_dim(self) -> int:

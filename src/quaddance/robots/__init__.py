@@ -35,6 +35,6 @@ def get_robot(name: str) -> RobotCfg:
     or one error listing those there are."""
     robot = ROBOTS.get(name) or ROBOTS.get(f"unitree_{name}")
     if robot is None:
-        known = ", ".join(r.removeprefix("unitree_") for r in ROBOTS)
+        known = ", ".join(r.short_name for r in ROBOTS.values())
         raise QuaddanceError(f"unknown robot {name!r}; known: {known}")
     return robot

@@ -144,6 +144,11 @@ class RobotCfg:
             raise QuaddanceError(f"RobotCfg {self.name}: three joints per leg, one foot per leg")
 
     @property
+    def short_name(self) -> str:
+        """The name ``--robot`` takes: ``unitree_go2`` -> ``go2``."""
+        return self.name.removeprefix("unitree_")
+
+    @property
     def num_joints(self) -> int:
         return len(self.joint_names)
 
