@@ -149,5 +149,5 @@ def test_the_task_runs_the_second_robot(long_calves):
 
 def test_robots_by_name():
     assert get_robot(GO1.name) is GO1 and ROBOTS[GO1.name] is GO1
-    with pytest.raises(QuaddanceError, match="unknown robot 'go7'; known: unitree_go1"):
+    with pytest.raises(QuaddanceError, match="unknown robot 'go7'; known: go1, go2"):
         get_robot("go7")
