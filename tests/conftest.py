@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from quaddance.music.synth import SongTruth, write_demo_song
+from quaddance.music.synth import SongTruth, render_song, write_demo_song
 
 
 @pytest.fixture(scope="session")
@@ -15,3 +15,14 @@ def demo_song(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, SongTruth
     path = tmp_path_factory.mktemp("demo") / "demo_song.wav"
     truth = write_demo_song(path)
     return path, truth
+
+
+@pytest.fixture(scope="session")
+def song_3s(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 3 s song made by code (120 BPM), written once per session as wav."""
+    import soundfile as sf
+
+    path = tmp_path_factory.mktemp("song") / "song_3s.wav"
+    y, _ = render_song(120.0, 3.0, seed=4)
+    sf.write(path, y, 22050)
+    return path

@@ -22,6 +22,7 @@ from quaddance.live.choreographer import (
     LiveChoreographer,
 )
 from quaddance.pipeline import DanceSpec
+from quaddance.robots import GO1, GO2
 from quaddance.targets import TargetConfig
 
 HZ = 50.0
@@ -136,8 +137,6 @@ def test_the_trunk_keeps_its_bounds_at_seams_and_back_to_calm_after_a_lost_lock(
     (`feasible_body_targets`) at every seam, and go back to the calm pose within them when
     the lock is lost: the blend of two plans exceeded them (height speed up to 1.2 x), and a
     lost lock dropped the trunk to calm in one tick."""
-    from quaddance.robots import GO1
-
     v_max = np.minimum(GO1.body_four_feet.max_speed, GO1.body_paw_up.max_speed)
     a_max = np.minimum(GO1.body_four_feet.max_accel, GO1.body_paw_up.max_accel)
     for seed in range(3):
@@ -325,10 +324,11 @@ def test_live_video_plays_the_song_from_where_the_dance_heard_it(monkeypatch, tm
     n = 10
     rollout = SimpleNamespace(base_rpy_rad=np.zeros((n, 3)), base_height_m=np.full(n, 0.27), fps=HZ)
     log = {"state": np.full(n, DeployState.DANCE.code), "q": np.zeros((n, 12))}
-    session._video(tmp_path / "dance.mp4", rollout, log, tmp_path / "song.wav", 5.0)
+    session._video(tmp_path / "dance.mp4", rollout, log, tmp_path / "song.wav", 5.0, GO2)
     ((args, kwargs),) = calls
     assert kwargs["audio_path"] == tmp_path / "song.wav" and kwargs["audio_offset_s"] == 5.0
     assert args[1].shape == (n, 19)  # free joint (position, quaternion) and 12 joints
+    assert kwargs["cfg"].robot is GO2  # the policy's robot is drawn
 
 
 def test_live_with_viewer_and_video(song, tmp_path):

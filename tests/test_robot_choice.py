@@ -11,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import soundfile as sf
 import torch
 
 from quaddance.choreo.grid import synthetic_grid
@@ -20,7 +19,6 @@ from quaddance.cli import main
 from quaddance.dancefile import load_dance, save_dance
 from quaddance.errors import InputFileError, QuaddanceError
 from quaddance.layout import BODY, PAWS
-from quaddance.music.synth import render_song
 from quaddance.pipeline import DanceSpec, compose, target_bank
 from quaddance.play.dance import spec_for_policy
 from quaddance.play.policy import OnnxPolicy, choose_policy, shipped_policy_path
@@ -54,14 +52,6 @@ def go2_policy(tmp_path_factory) -> Path:
     trainer.learn(1, progress=False)
     onnx_path, _ = trainer.export()
     return onnx_path
-
-
-@pytest.fixture(scope="module")
-def song(tmp_path_factory) -> Path:
-    path = tmp_path_factory.mktemp("song") / "song.wav"
-    y, _ = render_song(120.0, 3.0, seed=4)
-    sf.write(path, y, 22050)
-    return path
 
 
 def _quaddance(monkeypatch, capsys, *args: str) -> tuple[int, list[str]]:
@@ -192,19 +182,20 @@ def test_a_policy_is_refused_by_a_dance_for_another_robot(go2_policy):
 # --- the commands ---------------------------------------------------------------------------
 
 
-def test_choreograph_robot_makes_a_dance_for_it(monkeypatch, capsys, song, tmp_path):
+def test_choreograph_robot_makes_a_dance_for_it(monkeypatch, capsys, song_3s, tmp_path):
     out = tmp_path / "go2.npz"
-    code, err = _quaddance(monkeypatch, capsys, "choreograph", song, "--robot", "go2", "-o", out)
+    code, err = _quaddance(monkeypatch, capsys, "choreograph", song_3s, "--robot", "go2", "-o", out)
     assert code == 0, err
     assert load_dance(out).robot == GO2.name
-    code, err = _quaddance(monkeypatch, capsys, "choreograph", song, "--robot", "go7", "-o", out)
+    code, err = _quaddance(monkeypatch, capsys, "choreograph", song_3s, "--robot", "go7", "-o", out)
     _one_line_error(code, err, "unknown robot 'go7'; known: go1, go2")
 
 
-def test_deploy_refuses_a_dance_made_for_another_robot(monkeypatch, capsys, song, tmp_path):
+def test_deploy_refuses_a_dance_made_for_another_robot(monkeypatch, capsys, song_3s, tmp_path):
     made = tmp_path / "go2.npz"
     assert (
-        _quaddance(monkeypatch, capsys, "choreograph", song, "--robot", "go2", "-o", made)[0] == 0
+        _quaddance(monkeypatch, capsys, "choreograph", song_3s, "--robot", "go2", "-o", made)[0]
+        == 0
     )
     code, err = _quaddance(
         monkeypatch, capsys, "deploy", "--dance", made, "--out", tmp_path / "out", "--auto-start"
@@ -220,19 +211,19 @@ def test_dance_without_a_shipped_go2_policy_is_one_line(monkeypatch, capsys, tmp
 
 
 @pytest.mark.parametrize("command", ["dance", "eval"])
-def test_robot_and_policy_that_disagree_are_one_line(monkeypatch, capsys, go2_policy, song,
+def test_robot_and_policy_that_disagree_are_one_line(monkeypatch, capsys, go2_policy, song_3s,
                                                      tmp_path, command):  # fmt: skip
-    code, err = _quaddance(monkeypatch, capsys, command, song, "--policy", go2_policy,
+    code, err = _quaddance(monkeypatch, capsys, command, song_3s, "--policy", go2_policy,
                            "--robot", "go1", "--out" if command == "dance" else "--report",
                            tmp_path / "out")  # fmt: skip
     _one_line_error(code, err, f"{go2_policy}: a policy for go2, not for go1 (--robot go1)")
 
 
-def test_dance_with_a_go2_policy_dances_a_go2(monkeypatch, capsys, go2_policy, song, tmp_path):
+def test_dance_with_a_go2_policy_dances_a_go2(monkeypatch, capsys, go2_policy, song_3s, tmp_path):
     """--policy alone picks its robot: the dance is the Go2's, and so is the simulation."""
     # The command ends its process without teardown; here it must return to the tests.
     monkeypatch.setattr("quaddance.cli.dance.exit_without_teardown", lambda: None)
-    code, err = _quaddance(monkeypatch, capsys, "dance", song, "--policy", go2_policy,
+    code, err = _quaddance(monkeypatch, capsys, "dance", song_3s, "--policy", go2_policy,
                            "--no-video", "--out", tmp_path)  # fmt: skip
     assert code == 0, err
     assert load_dance(tmp_path / "dance.npz").robot == GO2.name
@@ -260,3 +251,11 @@ def test_a_go2_stands_on_zero_actions():
     late = np.array(heights[-10:])
     assert np.all(np.abs(late - GO2.standing_height_m) < 0.015), late
     assert env.robot.foot_height_m.abs().max() < 0.01  # four feet on the floor
+
+
+def test_playback_refuses_a_dance_for_another_robot(go2_policy):
+    from quaddance.play.rollout import playback_env
+
+    grid = synthetic_grid(100.0, 2.0, np.random.default_rng(1))
+    with pytest.raises(InputFileError, match="a policy for go2, not for go1"):
+        playback_env(compose(DanceSpec(), grid), OnnxPolicy.load(go2_policy))

@@ -27,6 +27,7 @@ from quaddance.deploy.job import BackendOptions
 from quaddance.errors import QuaddanceError
 from quaddance.layout import BODY, N_BODY, N_PAWS, PAWS, row_width
 from quaddance.pipeline import DanceSpec
+from quaddance.robots import RobotCfg
 
 #: Dance length for a microphone without --seconds, s.
 MIC_DEFAULT_S = 60.0
@@ -318,7 +319,7 @@ def run_live(job: LiveJob, status=lambda msg: None) -> tuple[dict, dict[str, Pat
         summary.update(whole_body_metrics(rollout, beats, standing_m))
         if job.video:
             paths["video"] = _video(
-                out / "dance.mp4", rollout, result.log, job.from_file, job.start_s
+                out / "dance.mp4", rollout, result.log, job.from_file, job.start_s, policy.robot
             )
     paths["live"] = out / "live.json"
     write_json(paths["live"], summary)
@@ -356,11 +357,11 @@ def _tracker_latency_ms() -> float:
     return round(LATENCY_S * 1e3, 1)
 
 
-def _video(path: Path, rollout, log: dict, song: Path, start_s: float = 0.0) -> Path:
-    """dance.mp4 from the danced poses (trunk from the simulator, joints from the encoders)
-    with the song from ``start_s`` into it (where the dance heard it), afterwards."""
+def _video(path: Path, rollout, log: dict, song: Path, start_s: float, robot: RobotCfg) -> Path:
+    """dance.mp4 of ``robot`` from the danced poses (trunk from the simulator, joints from the
+    encoders) with the song from ``start_s`` into it (where the dance heard it), afterwards."""
     from quaddance.deploy.states import DeployState
-    from quaddance.play.video import render_video
+    from quaddance.play.video import RenderCfg, render_video
 
     dancing = log["state"] == DeployState.DANCE.code
     q = log["q"][dancing]
@@ -384,7 +385,14 @@ def _video(path: Path, rollout, log: dict, song: Path, start_s: float = 0.0) -> 
     n = q.shape[0]
     qpos = np.column_stack([np.zeros((n, 2)), rollout.base_height_m, quat, q])
     render_video(
-        None, qpos, rollout.fps, path, audio_path=song, audio_offset_s=start_s, progress=False
+        None,
+        qpos,
+        rollout.fps,
+        path,
+        audio_path=song,
+        audio_offset_s=start_s,
+        progress=False,
+        cfg=RenderCfg(robot=robot),
     )
     return path
 

@@ -21,6 +21,7 @@ from quaddance.dancefile import Dance
 from quaddance.errors import QuaddanceError
 from quaddance.layout import BODY, PAWS
 from quaddance.play.policy import OnnxPolicy
+from quaddance.robots import get_robot
 
 
 @dataclass
@@ -156,6 +157,7 @@ def playback_env(
     from quaddance.sim import tasks
     from quaddance.sim.task import DanceEnv
 
+    policy.require_robot(get_robot(dance.robot), "the dance's robot")
     cfg = tasks.playback(policy.task, dance.targets_m.shape[0], randomize)
     if abs(dance.fps - cfg.policy_hz) > 1e-6:
         raise QuaddanceError(
