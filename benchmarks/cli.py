@@ -11,7 +11,7 @@ from typing import Annotated, Any
 
 import typer
 
-from quaddance.cli.options import PolicyOpt, RobotModelOpt, finite_in
+from quaddance.cli.options import PolicyOpt, PolicyRobotOpt, RobotModelOpt, finite_in
 
 app = typer.Typer(no_args_is_help=True, help="Benchmarks; each writes a JSON file of results.")
 
@@ -350,6 +350,7 @@ def bench_envelope_cmd(
         "docs/results/envelope.md"
     ),
     policy: PolicyOpt = None,
+    robot: PolicyRobotOpt = None,
     work: Annotated[Path, typer.Option(help="Folder for the default items.")] = Path(
         "runs/heldout"
     ),
@@ -362,11 +363,14 @@ def bench_envelope_cmd(
 
     from benchmarks.envelope import default_items, run_envelope, write_envelope
     from quaddance.play.evaluate import collect_items
+    from quaddance.play.policy import choose_policy
 
     console = Console(stderr=True)
+    _, policy_path = choose_policy(robot, policy)
     todo = collect_items(items) if items else default_items(work)
-    result = run_envelope(todo, policy, log=console.print)
-    command = "quaddance bench envelope" + (f" --policy {policy}" if policy else "")
+    result = run_envelope(todo, policy_path, log=console.print)
+    command = "quaddance bench envelope" + (f" --robot {robot}" if robot else "")
+    command += f" --policy {policy}" if policy else ""
     write_envelope(result, out, report, command)
     for name, p in result["pushes"].items():
         first = p["first_fall_vel_m_s"]

@@ -17,8 +17,10 @@ from typer.testing import CliRunner
 from benchmarks import envelope
 from quaddance.choreo.motion import load_motion
 from quaddance.cli import app
+from quaddance.errors import InputFileError
 from quaddance.music.synth import render_song
 from quaddance.play.heldout import OTHER_ITEMS, render_feet, write_held_out_set
+from quaddance.play.policy import shipped_policy_path
 from quaddance.play.rollout import PinnedDynamics
 from quaddance.robots import GO1
 
@@ -163,6 +165,24 @@ def test_bench_envelope_command_writes_json_and_markdown(
     assert "first fall at 3.00 m/s" in text
     assert "| friction 0.1 |" in text
     assert "quaddance bench envelope" in text
+
+
+def test_bench_envelope_robot_picks_the_robots_policy(song, small_envelope, tmp_path, monkeypatch):
+    seen = []
+
+    def fake_run(items, policy, log):
+        seen.append(policy)
+        return small_envelope
+
+    monkeypatch.setattr(envelope, "run_envelope", fake_run)
+    out, report = tmp_path / "env.json", tmp_path / "env.md"
+    args = ["bench", "envelope", str(song), "--out", str(out), "--report", str(report)]
+    assert CliRunner().invoke(app, [*args, "--robot", "go1"]).exit_code == 0
+    assert seen == [shipped_policy_path(GO1)]
+    # The Go1's policy on the Go2: the one-line user error naming both, nothing run.
+    wrong = CliRunner().invoke(app, [*args, "--robot", "go2", "--policy", str(seen[0])])
+    assert isinstance(wrong.exception, InputFileError) and len(seen) == 1
+    assert "a policy for go1, not for go2" in str(wrong.exception)
 
 
 # --- the feed-forward ablation's training switch ------------------------------------------
