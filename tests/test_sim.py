@@ -458,7 +458,7 @@ def test_action_lag_picks_the_target_issued_lag_substeps_ago():
     assert env.cfg.decimation == 4
     # Joint targets of this step (k=0), the last (k=1) and the one before (k=2): all joints = k.
     env._target_hist = torch.arange(3.0).view(1, 3, 1).expand(4, 3, 12).clone()
-    env.action_lag = torch.tensor([0, 6, 4, 2])
+    env.set_action_lag(torch.tensor([0, 6, 4, 2]))
     ctrl = env._lagged_controls()
     assert ctrl.shape == (4, 4, 12)
     # Substep j of this step uses the newest target issued at least `lag` substeps before it.

@@ -13,7 +13,7 @@ import torch
 
 from quaddance.deploy.robot import Reading
 from quaddance.errors import QuaddanceError
-from quaddance.layout import BODY, PAWS
+from quaddance.layout import BODY, FRONT_PAWS, PAWS
 from quaddance.play.policy import OnnxPolicy
 from quaddance.sim.body import BodyFeedforward
 from quaddance.sim.feedforward import FrontLiftFeedforward
@@ -95,6 +95,12 @@ class DanceController:
             u = min(1.0, (k - first) / n)
             return row + u * (self.rest_row - row)
         return self.rows[min(k, self.n_steps - 1)][None]
+
+    def lift_feedforward(self, ahead_steps: int) -> torch.Tensor | None:
+        """(1, 12) the front-lift feed-forward of `targets_at` ``ahead_steps``; None without."""
+        if self.feedforward is None:
+            return None
+        return self.feedforward(self.target_row(ahead_steps)[:, FRONT_PAWS])
 
     def targets_at(self, ahead_steps: int) -> torch.Tensor:
         """(1, 4) paw targets ``ahead_steps`` ticks from the current step (held at the end;

@@ -187,7 +187,7 @@ def playback_env(
     )
     if pinned is not None:
         # Without randomisation the task never redraws the lag, so it stays as set here.
-        env.action_lag[:] = lag_substeps
+        env.set_action_lag(lag_substeps)
     if env.obs_layout.actor_dim != policy.obs_dim:
         raise QuaddanceError(
             f"policy {policy.onnx_path} expects {policy.obs_dim} observations, the task makes "
@@ -261,7 +261,7 @@ def _play(
     for t in range(n_steps):
         # Rows read through numpy: indexing the tensors would cost a torch op each.
         robot = env.robot
-        qpos[t] = env.engine.read().qpos.numpy()[0]
+        qpos[t] = robot.qpos.numpy()[0]
         feet[t] = robot.foot_height_m.numpy()[0]
         row = env.target_row(0).numpy()[0]
         targets[t], body_targets[t] = row[PAWS], row[BODY]
@@ -277,7 +277,7 @@ def _play(
         if done.numpy()[0]:
             if not extras["time_outs"].numpy()[0]:
                 falls.append((t + 1) / cfg.policy_hz)
-            env.bank_offset[0] = t + 1  # carry on from where the song is
+            env.start_at(env0, t + 1)  # carry on from where the song is
             obs_td = env.get_observations()
         obs = obs_td["actor"].numpy()
         if progress is not None:

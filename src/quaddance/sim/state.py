@@ -95,6 +95,11 @@ class RobotState:
         self._qpos, self._qvel, self._sensordata, self._layout = qpos, qvel, sensordata, layout
         self.foot_radius_m = layout.foot_radius_m
 
+    @property
+    def qpos(self) -> torch.Tensor:
+        """(N, nq) MuJoCo's qpos as read: the pose a video draws."""
+        return self._qpos
+
     def _sensors(self, idx: tuple[int, ...]) -> torch.Tensor:
         return self._sensordata.index_select(1, _index(idx, self._sensordata.device))
 

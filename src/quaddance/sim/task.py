@@ -7,7 +7,7 @@ playback (one env, no randomisation) use this same class.
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 import numpy as np
 import torch
@@ -47,11 +47,15 @@ class JointTargetSource(Protocol):
 
     nominal_joint_pos: torch.Tensor
     action_scale: torch.Tensor
-    feedforward: FrontLiftFeedforward | None
     body_feedforward: BodyFeedforward | None
 
     def target_row(self, ahead_steps: int) -> torch.Tensor:
         """(N, 8) the paw then the body targets ``ahead_steps`` policy steps from now."""
+        ...
+
+    def lift_feedforward(self, ahead_steps: int) -> torch.Tensor | None:
+        """(N, 12) the front-lift feed-forward (`sim.feedforward`) of the paw targets
+        ``ahead_steps`` policy steps from now; None without it."""
         ...
 
 
@@ -61,14 +65,22 @@ def joint_targets(actions: torch.Tensor, src: JointTargetSource) -> torch.Tensor
     contract written into the policy's JSON). Training and the robot runner (deploy/) both
     call this."""
     target = src.nominal_joint_pos + src.action_scale * actions
-    if src.feedforward is None and src.body_feedforward is None:
-        return target
-    row = src.target_row(1)
-    if src.feedforward is not None:
-        target = target + src.feedforward(row[:, FRONT_PAWS])
+    lift = src.lift_feedforward(1)
+    if lift is not None:
+        target = target + lift
     if src.body_feedforward is not None:
-        target = target + src.body_feedforward(row[:, BODY])
+        target = target + src.body_feedforward(src.target_row(1)[:, BODY])
     return target
+
+
+class _StepRows(NamedTuple):
+    """One step's target rows by offset (policy steps ahead): whole, paws, body, and the
+    front-lift feed-forward of each."""
+
+    full: dict[int, torch.Tensor]
+    paws: dict[int, torch.Tensor]
+    body: dict[int, torch.Tensor]
+    lift: dict[int, torch.Tensor] | None  # the front-lift feed-forward, when the task has it
 
 
 class DanceEnv:
@@ -118,10 +130,7 @@ class DanceEnv:
             bank_t = torch.cat([bank_t, torch.zeros(*bank_t.shape[:2], N_BODY)], dim=2)
         self.bank = bank_t.to(dev)
         self.random_start = random_start
-        # Training's curriculum (0: the paws-only task, 1: the full one) scales the body
-        # targets, which everything reads through `body_targets_at` (observation, rewards,
-        # feed-forward), and the weights of the `RewardTerm.curriculum` terms.
-        self.curriculum_scale = 1.0
+        self._curriculum_scale = 1.0
         # The actor's observation: the same builder as the robot runner's (deploy/).
         self.actor_obs = observations.ActorObservation(cfg, cfg.num_envs, dev)
         self.preview_steps = self.actor_obs.preview_steps
@@ -139,6 +148,15 @@ class DanceEnv:
             else None
         )
         self.body_feedforward = BodyFeedforward(cfg.scene.robot, dev) if cfg.whole_body else None
+        # What a step looks up in the bank: its rows [paws | body], then the front-lift
+        # feed-forward of each row, made here once. That is a function of the row's paw
+        # targets alone, and made of exactly rounded ops (no sin, atan2, ...), so these are
+        # the numbers it gives row by row.
+        self._lookup = self.bank
+        if self.feedforward is not None:
+            front = self.bank[..., FRONT_PAWS]
+            lift = self.feedforward(front.reshape(-1, front.shape[2]))
+            self._lookup = torch.cat([self.bank, lift.view(*front.shape[:2], -1)], dim=2)
         lo = torch.tensor(model.jnt_range[1:, 0], dtype=torch.float32, device=dev)
         hi = torch.tensor(model.jnt_range[1:, 1], dtype=torch.float32, device=dev)
         mid, half = (lo + hi) / 2, (hi - lo) / 2 * 0.9
@@ -159,6 +177,11 @@ class DanceEnv:
         self.dynamics = self._variants[torch.zeros(n, dtype=torch.long, device=dev)]
         self._last_proprio: torch.Tensor | None = None
         self._ahead: dict[tuple[int, ...], torch.Tensor] = {}  # `_bank_rows`' step offsets
+        # Every offset a step reads (observation, joint targets, rewards) and this step's rows
+        # at them, looked up together at the first read (`_rows_now`): one lookup per step.
+        self._row_steps = tuple(dict.fromkeys((0, 1, *self.preview_steps)))
+        self._rows: _StepRows | None = None
+        self._lag_index = self._lag_gather_index()
         self.robot: RobotState = self._read_state()
         self.errors = rewards.TrackingErrors(self)
         self.fell = torch.zeros(n, dtype=torch.bool, device=dev)
@@ -173,32 +196,81 @@ class DanceEnv:
 
     # --- targets ---------------------------------------------------------------------------
     def _bank_rows(self, *ahead_steps: int) -> torch.Tensor:
-        """(N, K, 8) the bank's rows [paws | body] at each of the K ``ahead_steps`` policy
-        steps from now (held at the sequence's end), the body scaled by the curriculum: one
-        lookup for them all."""
+        """(N, K, C) the bank's rows [paws | body | front-lift feed-forward] at each of the K
+        ``ahead_steps`` policy steps from now (held at the sequence's end), the body scaled
+        by the curriculum: one lookup for them all."""
         ahead = self._ahead.get(ahead_steps)
         if ahead is None:
             with torch.inference_mode(False):  # usable in and out of inference mode
                 ahead = torch.tensor(ahead_steps, device=self.device)
             self._ahead[ahead_steps] = ahead
         t = (self.bank_offset + self.episode_length_buf).unsqueeze(1) + ahead
-        rows = self.bank[self.bank_idx.unsqueeze(1), t.clamp(max=self.bank.shape[1] - 1)]
+        rows = self._lookup[self.bank_idx.unsqueeze(1), t.clamp(max=self.bank.shape[1] - 1)]
         if self.curriculum_scale == 1.0:
             return rows
-        return torch.cat([rows[..., PAWS], rows[..., BODY] * self.curriculum_scale], dim=2)
+        scaled = rows[..., BODY] * self.curriculum_scale
+        return torch.cat([rows[..., PAWS], scaled, rows[..., BODY.stop :]], dim=2)
+
+    @property
+    def curriculum_scale(self) -> float:
+        """Training's curriculum (0: the paws-only task, 1: the full one): it scales the body
+        targets, which everything reads through `body_targets_at` (observation, rewards,
+        feed-forward), and the weights of the `RewardTerm.curriculum` terms."""
+        return self._curriculum_scale
+
+    @curriculum_scale.setter
+    def curriculum_scale(self, value: float) -> None:
+        self._curriculum_scale = value
+        self._rows = None
+
+    def _rows_now(self) -> _StepRows:
+        """This step's target rows at each of `_row_steps`, looked up at the first read after
+        the time or the sequence changed."""
+        if self._rows is None:
+            rows = self._bank_rows(*self._row_steps)
+            at = lambda cols: dict(zip(self._row_steps, rows[..., cols].unbind(1), strict=True))  # noqa: E731
+            self._rows = _StepRows(
+                at(slice(0, BODY.stop)),
+                at(PAWS),
+                at(BODY),
+                at(slice(BODY.stop, None)) if self.feedforward is not None else None,
+            )
+        return self._rows
 
     def target_row(self, ahead_steps: int) -> torch.Tensor:
-        """(N, 8) `targets_at` then `body_targets_at` of ``ahead_steps``, in one lookup."""
-        return self._bank_rows(ahead_steps)[:, 0]
+        """(N, 8) `targets_at` then `body_targets_at` of ``ahead_steps``."""
+        row = self._rows_now().full.get(ahead_steps)
+        return row if row is not None else self._bank_rows(ahead_steps)[:, 0, : BODY.stop]
+
+    def lift_feedforward(self, ahead_steps: int) -> torch.Tensor | None:
+        """(N, 12) the front-lift feed-forward of `targets_at` ``ahead_steps``; None without."""
+        lift = self._rows_now().lift
+        if lift is None:
+            return None
+        row = lift.get(ahead_steps)
+        return row if row is not None else self._bank_rows(ahead_steps)[:, 0, BODY.stop :]
 
     def targets_at(self, ahead_steps: int) -> torch.Tensor:
         """(N, 4) paw targets `ahead_steps` policy steps from now (held at the sequence's end)."""
-        return self.target_row(ahead_steps)[:, PAWS]
+        row = self._rows_now().paws.get(ahead_steps)
+        return row if row is not None else self.target_row(ahead_steps)[:, PAWS]
 
     def body_targets_at(self, ahead_steps: int) -> torch.Tensor:
         """(N, 4) body targets (height offset m, roll, pitch, yaw rad) `ahead_steps` from now;
         zeros for a paws-only dance."""
-        return self.target_row(ahead_steps)[:, BODY]
+        row = self._rows_now().body.get(ahead_steps)
+        return row if row is not None else self.target_row(ahead_steps)[:, BODY]
+
+    def start_at(self, ids: torch.Tensor, bank_step: int) -> None:
+        """Envs ``ids`` play their sequence from ``bank_step`` on, from their next step."""
+        self.bank_offset[ids] = bank_step
+        self._rows = None
+
+    def set_action_lag(self, substeps: int | torch.Tensor) -> None:
+        """Delay the envs' joint targets by ``substeps`` physics steps (one number, or (N,)
+        one per env), kept until a randomising reset draws new lags."""
+        self.action_lag[:] = substeps
+        self._lag_index = self._lag_gather_index()
 
     # --- VecEnv interface ----------------------------------------------------------------------
     def get_observations(self):
@@ -207,12 +279,7 @@ class DanceEnv:
         critic's there."""
         prop = self._proprio()
         self._last_proprio = prop  # the next step's history frame
-        # Every target row the observation reads, looked up at once.
-        steps = (0, *self.preview_steps)
-        rows = self._bank_rows(*steps)
-        paws = dict(zip(steps, rows[..., PAWS].unbind(1), strict=True))
-        body = dict(zip(steps, rows[..., BODY].unbind(1), strict=True))
-        actor = self.actor_obs.build(prop, paws.__getitem__, body.__getitem__)
+        actor = self.actor_obs.build(prop, self.targets_at, self.body_targets_at)
         groups = {"actor": actor}
         if not self.compute_rewards:
             return groups
@@ -238,6 +305,7 @@ class DanceEnv:
         self._target_hist = torch.cat([target.unsqueeze(1), self._target_hist[:, :2]], dim=1)
         self.robot = self._read_state(self.engine.step(self._lagged_controls()))
         self.episode_length_buf += 1
+        self._rows = None
 
         self.fell, time_out = terminations.evaluate(self)
         self._push()
@@ -257,18 +325,21 @@ class DanceEnv:
         return joint_targets(actions, self)
 
     # --- internals -------------------------------------------------------------------------------
-    def _lagged_controls(self) -> torch.Tensor:
-        """(N, decimation, 12) joint targets per physics substep, delayed by each env's lag.
+    def _lag_gather_index(self) -> torch.Tensor:
+        """(N, decimation, 12) `_lagged_controls`' index into the joint-target history.
 
-        The target applied at substep j of this step is the one computed ceil((lag - j) / D)
-        policy steps ago (D = decimation), so a lag of 6 substeps is 30 ms.
+        The target applied at substep j of a step is the one computed ceil((lag - j) / D)
+        policy steps ago (D = decimation), so a lag of 6 substeps is 30 ms. Made when the lags
+        change, not at every step.
         """
         lag = self.action_lag.unsqueeze(1) + self._lag_shift  # lag - j + D - 1, (N, D)
         back = torch.div(lag, self.cfg.decimation, rounding_mode="floor")
         back = back.clamp(0, self._target_hist.shape[1] - 1)
-        return torch.gather(
-            self._target_hist, 1, back.unsqueeze(2).expand(-1, -1, self.num_actions)
-        )
+        return back.unsqueeze(2).expand(-1, -1, self.num_actions)
+
+    def _lagged_controls(self) -> torch.Tensor:
+        """(N, decimation, 12) joint targets per physics substep, delayed by each env's lag."""
+        return torch.gather(self._target_hist, 1, self._lag_index)
 
     def measure(self) -> observations.Measurement:
         """What the robots' sensors read now (with sensor noise when randomising)."""
@@ -359,6 +430,8 @@ class DanceEnv:
         for buf in (self.last_action, self.prev_action, self.prev_prev_action, self.prev_joint_vel):
             buf[ids] = 0.0
         self._target_hist[ids] = qpos[:, 7:].unsqueeze(1).expand(-1, 3, -1)
+        self._lag_index = self._lag_gather_index()
+        self._rows = None
         self.engine.reset(ids, qpos, qvel)
         self.robot = self._read_state()
         self.actor_obs.reset(ids, self._proprio())
