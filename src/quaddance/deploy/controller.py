@@ -63,6 +63,7 @@ class DanceController:
         )
         self.step = 0  # dance step (policy ticks since dance time 0)
         self.heading_zero_rad = 0.0  # IMU yaw at dance time 0 (`reset`)
+        self._measured: tuple[Reading, Measurement] | None = None  # the last reading's
         self._fade: tuple[torch.Tensor, int, int] | None = None
         #: What `fade_out` ends at: feet down; a whole-body policy also crouches (the lowest
         #: trunk height it dances), so damping after the dance lets it down from lower.
@@ -117,15 +118,20 @@ class DanceController:
         self._fade = (self.target_row(0).clone(), self.step, max(1, steps))
 
     def measurement(self, reading: Reading) -> Measurement:
-        """The reading as the actor's `Measurement`, its heading relative to the dance's start."""
+        """The reading as the actor's `Measurement`, its heading relative to the dance's start;
+        made once per reading (the runner's posture checks and the observation both read it)."""
+        if self._measured is not None and self._measured[0] is reading:
+            return self._measured[1]
         t = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float32)[None]  # noqa: E731
-        return Measurement.from_imu(
+        meas = Measurement.from_imu(
             t(reading.quat_wxyz),
             t(reading.gyro_rad_s),
             t(reading.joint_pos_rad),
             t(reading.joint_vel_rad_s),
             self.heading_zero_rad,
         )
+        self._measured = (reading, meas)
+        return meas
 
     def reset(self, reading: Reading) -> None:
         """Dance time 0: no previous action, the history filled with the current frame, the
@@ -135,6 +141,7 @@ class DanceController:
         self.last_action = torch.zeros_like(self.last_action)
         quat = torch.as_tensor(np.asarray(reading.quat_wxyz), dtype=torch.float32)[None]
         self.heading_zero_rad = float(yaw_from_quat(quat)[0])
+        self._measured = None  # its heading counts from the new zero
         prop = self.actor_obs.proprio(self.measurement(reading), self.last_action)
         self.actor_obs.reset(self._ids, prop)
 

@@ -102,7 +102,8 @@ class Runner:
         threads = torch.get_num_threads()
         torch.set_num_threads(1)  # one robot: threads only add latency
         try:
-            with realtime_priority(RUNNER_RT_PRIORITY) as self.priority:
+            # No autograd bookkeeping on the policy step's many small ops (as in playback).
+            with realtime_priority(RUNNER_RT_PRIORITY) as self.priority, torch.inference_mode():
                 return self._run()
         except BaseException:
             self._emergency_damp()

@@ -265,7 +265,7 @@ def _play(
         feet[t] = robot.foot_height_m.numpy()[0]
         row = env.target_row(0).numpy()[0]
         targets[t], body_targets[t] = row[PAWS], row[BODY]
-        base_height[t] = robot.base_pos_w.numpy()[0, 2]
+        base_height[t] = qpos[t, 2]  # `RobotState.base_pos_w` is qpos[:3]
         base_rpy[t] = robot.base_rpy_rad.numpy()[0]
         if on_pose is not None:
             on_pose(t, qpos[t], targets[t])
