@@ -476,11 +476,27 @@ def bench_deploy_cmd(
     )
 
 
+def _robot_results(robot: str, name: str) -> Path:
+    """Where a robot's benchmark file goes: the Go1's in benchmarks/results, another robot's
+    in a folder of its own (benchmarks/results/go2/...)."""
+    from quaddance.robots import GO1, get_robot
+
+    cfg = get_robot(robot)
+    folder = Path("benchmarks/results")
+    return folder / name if cfg.name == GO1.name else folder / cfg.short_name / name
+
+
 @app.command("body-reach")
 def bench_body_reach_cmd(
     out: Annotated[
-        Path, typer.Option("--out", "-o", help="Where to write the JSON results.")
-    ] = Path("benchmarks/results/body_reach.json"),
+        Path | None,
+        typer.Option(
+            "--out",
+            "-o",
+            help="JSON results (default: benchmarks/results/body_reach.json, a Go2's under "
+            "benchmarks/results/go2/).",
+        ),
+    ] = None,
     policy: Annotated[
         Path | None,
         typer.Option(help="A whole-body policy .onnx to balance; default: feed-forward alone."),
@@ -503,6 +519,7 @@ def bench_body_reach_cmd(
     loaded = None if policy is None else OnnxPolicy.load(policy)
     with console.status("Sweeping trunk poses..."):
         results = bench_body_reach(loaded, get_robot(robot))
+    out = out or _robot_results(results["robot"], "body_reach.json")
     results["machine"] = machine_info()
     for which in ("four_feet", "paw_up"):
         ranges = ", ".join(f"{k} {lo:+g}..{hi:+g}" for k, (lo, hi) in results[which].items())
@@ -513,9 +530,15 @@ def bench_body_reach_cmd(
 
 @app.command("reach")
 def bench_reach_cmd(
-    out: Annotated[Path, typer.Option("--out", "-o", help="JSON results.")] = Path(
-        "benchmarks/results/reach.json"
-    ),
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out",
+            "-o",
+            help="JSON results (default: benchmarks/results/reach.json, a Go2's under "
+            "benchmarks/results/go2/).",
+        ),
+    ] = None,
     feet: Annotated[
         list[str] | None, typer.Option("--foot", help="Front foot to lift, FL or FR (repeat).")
     ] = None,
@@ -564,6 +587,7 @@ def bench_reach_cmd(
             progress=show,
             robot=get_robot(robot),
         )
+    out = out or _robot_results(results["robot"], "reach.json")
     write_json(out, results)
     for foot, r in results["feet"].items():
         print(

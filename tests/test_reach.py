@@ -133,12 +133,12 @@ def test_bench_reach_writes_json(tmp_path: Path) -> None:
     assert bad.exit_code != 0
 
 
-def test_robot_option_measures_that_robot(tmp_path: Path) -> None:
-    out = tmp_path / "reach_go2.json"
+def test_robot_option_measures_that_robot(tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.chdir(tmp_path)  # the default output goes under the working directory
     args = ["bench", "reach", "--robot", "go2", "--foot", "FL", "--height", "0.05"]
-    result = CliRunner().invoke(app, [*args, "--tolerance", "0.05", "--out", str(out)])
+    result = CliRunner().invoke(app, [*args, "--tolerance", "0.05"])
     assert result.exit_code == 0, result.output
-    report = json.loads(out.read_text())
+    report = json.loads((tmp_path / "benchmarks/results/go2/reach.json").read_text())
     assert report["robot"] == "unitree_go2"
     assert report["feet"]["FL"]["reach_m"] == 0.05
     # The Go2's front thigh turns 90 deg forward (the Go1's 39 deg, whose bound is < 0.42 m).

@@ -61,10 +61,15 @@ GO2 = RobotCfg(
     max_tilt_rad=1.0,
     # Highest front-foot target while standing on three legs: 80 % of the 0.515 m that the
     # Go2 held in our simulator (`quaddance bench reach --robot go2`, quasi-static, trunk at
-    # 0.32 m; benchmarks/results/reach_go2.json), where its front thigh's range (to -90 deg,
+    # 0.32 m; benchmarks/results/go2/reach.json), where its front thigh's range (to -90 deg,
     # the Go1's to -39 deg) is the limit. A policy declares the range it was trained on in
     # its JSON, and `quaddance dance` uses that instead.
     max_paw_height_m=0.41,
+    # The Go1's trunk ranges, which the shipped Go2 policy was trained on, lie inside what it
+    # holds (`quaddance bench body-reach --policy go2_dance.onnx`,
+    # benchmarks/results/go2/body_reach.json): four feet down, height -10..+9 cm, roll
+    # -0.35..+0.5, pitch -0.4..+0.5, yaw +-0.5 rad; front-left paw 15 cm up, height
+    # -10..+9 cm, roll +-0.5, pitch -0.5..+0.4, yaw -0.2..+0.35 rad.
     body_four_feet=BodyLimits(
         height_offset_m=(-0.06, 0.03), roll_rad=0.25, pitch_rad=0.20, yaw_rad=0.25
     ),
