@@ -11,6 +11,20 @@ import numpy as np
 from quaddance.errors import QuaddanceError
 
 
+def per_joint(legs: tuple[str, ...], hip: float, thigh: float, calf: float) -> tuple[float, ...]:
+    """One value per joint in model order: hip, thigh, calf of each of ``legs``."""
+    return (hip, thigh, calf) * len(legs)
+
+
+def legged_gym_stand_rad(legs: tuple[str, ...]) -> tuple[float, ...]:
+    """The nominal stand of legged_gym's Unitree quadrupeds (Go1 and Go2 alike): hips +-0.1
+    (left legs out), thighs 0.8 front / 1.0 rear, calves -1.5 rad; model order."""
+    out: list[float] = []
+    for leg in legs:
+        out += [0.1 if leg.endswith("L") else -0.1, 0.8 if leg.startswith("F") else 1.0, -1.5]
+    return tuple(out)
+
+
 @dataclass(frozen=True)
 class BodyLimits:
     """The trunk pose range a robot holds while dancing, relative to standing.

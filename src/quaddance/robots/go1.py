@@ -7,27 +7,19 @@ Numbers follow the paper's released code (FACTS.md section 2) unless noted; mjla
 
 from __future__ import annotations
 
-from quaddance.robots.config import BodyLimits, FrontLiftCfg, RobotCfg, SafetyLimits
+from quaddance.robots.config import (
+    BodyLimits,
+    FrontLiftCfg,
+    RobotCfg,
+    SafetyLimits,
+    legged_gym_stand_rad,
+    per_joint,
+)
 
 # Legs in the model's order (the MJCF lists FR, FL, RR, RL); each leg has hip, thigh, calf.
 _LEGS = ("FR", "FL", "RR", "RL")
 # The task's foot order everywhere in quaddance (targets, observations, metrics).
 _FEET = ("FL", "FR", "RL", "RR")
-
-
-def _per_joint(hip: float, thigh: float, calf: float) -> tuple[float, ...]:
-    return (hip, thigh, calf) * len(_LEGS)
-
-
-def _nominal_joint_pos_rad() -> tuple[float, ...]:
-    # Released code: hips +-0.1 (left legs out), thighs 0.8 front / 1.0 rear, calves -1.5 rad.
-    out: list[float] = []
-    for leg in _LEGS:
-        hip = 0.1 if leg.endswith("L") else -0.1
-        thigh = 0.8 if leg.startswith("F") else 1.0
-        out += [hip, thigh, -1.5]
-    return tuple(out)
-
 
 # Effort limits and reflected rotor inertia (armature) as in mjlab's go1_constants: the knees
 # are geared 1.5x the hips.
@@ -52,13 +44,13 @@ GO1 = RobotCfg(
     trunk_body="trunk",
     thigh_bodies=tuple(f"{leg}_thigh" for leg in _LEGS),
     knee_geoms=tuple(f"{leg}_calf_collision1" for leg in _LEGS),
-    nominal_joint_pos_rad=_nominal_joint_pos_rad(),
+    nominal_joint_pos_rad=legged_gym_stand_rad(_LEGS),  # the released code's stand
     init_base_height_m=0.325,  # spawn height with the feet on the floor; settles to 0.27 m
     standing_height_m=0.27,  # the trunk on the nominal pose (target of the base-height reward)
     kp=20.0,  # released code (the paper's text says kp 20)
     kd=0.5,  # released code (the paper's text says 5)
-    effort_limit_nm=_per_joint(_HIP_EFFORT_NM, _HIP_EFFORT_NM, _KNEE_EFFORT_NM),
-    armature=_per_joint(_HIP_ARMATURE, _HIP_ARMATURE, _KNEE_ARMATURE),
+    effort_limit_nm=per_joint(_LEGS, _HIP_EFFORT_NM, _HIP_EFFORT_NM, _KNEE_EFFORT_NM),
+    armature=per_joint(_LEGS, _HIP_ARMATURE, _HIP_ARMATURE, _KNEE_ARMATURE),
     min_base_height_m=0.12,
     max_tilt_rad=1.0,
     # Highest front-foot target while standing on three legs: 80 % of the 0.38 m that the

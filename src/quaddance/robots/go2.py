@@ -9,27 +9,18 @@ in the Go1's order. The nominal pose and the PD gains are Unitree's for this rob
 
 from __future__ import annotations
 
-from quaddance.robots.config import BodyLimits, FrontLiftCfg, RobotCfg, SafetyLimits
+from quaddance.robots.config import (
+    BodyLimits,
+    FrontLiftCfg,
+    RobotCfg,
+    SafetyLimits,
+    legged_gym_stand_rad,
+    per_joint,
+)
 
 # Legs in the model's order (the vendored MJCF lists FR, FL, RR, RL); hip, thigh, calf each.
 _LEGS = ("FR", "FL", "RR", "RL")
 _FEET = ("FL", "FR", "RL", "RR")
-
-
-def _per_joint(hip: float, thigh: float, calf: float) -> tuple[float, ...]:
-    return (hip, thigh, calf) * len(_LEGS)
-
-
-def _nominal_joint_pos_rad() -> tuple[float, ...]:
-    # unitree_rl_gym go2_config: hips +-0.1 (left legs out), thighs 0.8 front / 1.0 rear,
-    # calves -1.5 rad.
-    out: list[float] = []
-    for leg in _LEGS:
-        hip = 0.1 if leg.endswith("L") else -0.1
-        thigh = 0.8 if leg.startswith("F") else 1.0
-        out += [hip, thigh, -1.5]
-    return tuple(out)
-
 
 # The model's motor ctrlrange (unitree_mujoco go2.xml): 23.7 N m at hip and thigh, 45.43 N m
 # at the knee; its joints' armature 0.01 kg m^2.
@@ -50,13 +41,13 @@ GO2 = RobotCfg(
     trunk_body="base",
     thigh_bodies=tuple(f"{leg}_thigh" for leg in _LEGS),
     knee_geoms=tuple(f"{leg}_calf_collision1" for leg in _LEGS),
-    nominal_joint_pos_rad=_nominal_joint_pos_rad(),
+    nominal_joint_pos_rad=legged_gym_stand_rad(_LEGS),  # unitree_rl_gym go2_config's stand
     init_base_height_m=0.325,  # spawn with the feet just above the floor (legs as the Go1's)
     standing_height_m=0.25,  # where the trunk settles on the nominal pose (15.2 kg on kp 20)
     kp=20.0,  # unitree_rl_gym go2_config: stiffness 20 N m/rad
     kd=0.5,  # damping 0.5 N m s/rad
-    effort_limit_nm=_per_joint(_HIP_EFFORT_NM, _HIP_EFFORT_NM, _KNEE_EFFORT_NM),
-    armature=_per_joint(_ARMATURE, _ARMATURE, _ARMATURE),
+    effort_limit_nm=per_joint(_LEGS, _HIP_EFFORT_NM, _HIP_EFFORT_NM, _KNEE_EFFORT_NM),
+    armature=per_joint(_LEGS, _ARMATURE, _ARMATURE, _ARMATURE),
     min_base_height_m=0.12,
     max_tilt_rad=1.0,
     # Highest front-foot target while standing on three legs: 80 % of the 0.515 m that the
