@@ -259,3 +259,16 @@ def test_playback_refuses_a_dance_for_another_robot(go2_policy):
     grid = synthetic_grid(100.0, 2.0, np.random.default_rng(1))
     with pytest.raises(InputFileError, match="a policy for go2, not for go1"):
         playback_env(compose(DanceSpec(), grid), OnnxPolicy.load(go2_policy))
+
+
+def test_deploy_sim_simulates_the_policys_robot(monkeypatch):
+    from quaddance.deploy import sim_backend
+    from quaddance.deploy.job import BackendOptions, make_robot
+
+    made = []
+    monkeypatch.setattr(sim_backend, "SimRobot", lambda cfg: made.append(cfg) or cfg)
+    make_robot(BackendOptions(robot="sim"), GO2)
+    make_robot(BackendOptions(robot="sim"), GO1)
+    assert [cfg.robot for cfg in made] == [GO2.name, GO1.name]
+    with pytest.raises(QuaddanceError, match="drives a Go1"):
+        make_robot(BackendOptions(robot="go1"), GO2)

@@ -19,7 +19,10 @@ PolicyOpt = Annotated[
     Path | None, typer.Option(help="Policy .onnx (its .json beside it); default: shipped.")
 ]
 RobotOpt = Annotated[
-    str, typer.Option(help="sim (a simulated Go1 in another process) or go1 (a real one).")
+    str,
+    typer.Option(
+        help="sim (the policy's robot, simulated in another process) or go1 (a real Go1)."
+    ),
 ]
 RobotModelOpt = Annotated[
     str, typer.Option("--robot", help="Robot model: go1 or go2 (its limits and policy).")
