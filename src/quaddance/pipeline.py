@@ -49,6 +49,7 @@ from quaddance.targets import (
 if TYPE_CHECKING:
     from quaddance.choreo.motion import HumanMotion
     from quaddance.music.analysis import Analysis
+    from quaddance.music.beat_file import BeatList
     from quaddance.robots import RobotCfg
 
 #: Tempo range of the training bank, BPM: dance music is mostly 80-135 (AIST++ 80-130),
@@ -68,12 +69,15 @@ class DanceSpec:
             (`quaddance.choreo.moves_file.load_moves`); None: the built-in ones.
         targets: how the human dance becomes robot targets: the robot (`robot`), whose
             paw and trunk limits the dance keeps to, the mode (`mode`), the output rate.
+        beats: beats from a file (``--beats``, `quaddance.music.beat_file.read_beats`) that
+            replace the music's in the grid (`MusicGrid.with_beats`); None: the music's.
     """
 
     style: str = "mixed"
     seed: int = 0
     moves: MoveSet | None = None
     targets: TargetConfig = field(default_factory=TargetConfig)
+    beats: BeatList | None = None
 
     def __post_init__(self) -> None:
         names = (self.moves or MoveSet()).style_names
@@ -106,6 +110,7 @@ def compose(
         spec: which dance (style, seed, moves, targets).
         grid: the music: the built-in choreographer dances to it; with ``motion`` it only
             supplies the beats (stored in the dance, used to snap feasible targets).
+            ``spec.beats`` replace its beats (one line if one falls after its end).
         motion: a human dance (`quaddance.choreo.motion.HumanMotion`) to dance instead of
             the choreographer's; a motion without a trunk dances with a still one.
         music_name: what the music is called in ``dance.source``.
@@ -121,6 +126,12 @@ def compose(
     """
     cfg = spec.targets
     four_feet = cfg.robot.body_four_feet
+    if spec.beats is not None:
+        if grid is None:
+            raise QuaddanceError(f"{spec.beats.path}: beats from a file need a song")
+        spec.beats.check_within(grid.duration_s)
+        grid = grid.with_beats(spec.beats.beats_s, spec.beats.downbeats_s)
+        music_name += f", beats of {spec.beats.name}"
     if motion is not None:
         feet_m, fps = np.asarray(motion.feet_m, dtype=np.float64), float(motion.fps)
         # Motions without a trunk (or stand-ins that carry only feet) dance with a still body.
@@ -295,8 +306,10 @@ def dance_table(dance: Dance, analysis: Analysis | None, out: Path) -> Any:
     table = Table(title=f"dance -> {out}", show_header=False)
     table.add_row("source", dance.source)
     table.add_row("duration", f"{dance.duration_s:.1f} s at {dance.fps:g} Hz")
-    if analysis is not None:
-        table.add_row("tempo", f"{analysis.tempo_bpm:.1f} BPM, {dance.beats_s.size} beats")
+    if analysis is not None and dance.beats_s.size > 1:
+        # The dance's beats: the analyser's, or a beat file's (its tempo as the analyser's).
+        tempo_bpm = 60.0 / float(np.median(np.diff(dance.beats_s)))
+        table.add_row("tempo", f"{tempo_bpm:.1f} BPM, {dance.beats_s.size} beats")
     table.add_row("mode", dance.mode)
     table.add_row("lifts FL / FR", f"{n_lifts[0]} / {n_lifts[1]}")
     table.add_row("highest target", f"{front.max():.3f} m")

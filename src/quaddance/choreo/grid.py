@@ -8,12 +8,15 @@ This module must not import librosa or `quaddance.music`.
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from quaddance.errors import QuaddanceError
+from quaddance.layout import BEATS_PER_BAR
 
 #: Window over which loudness is averaged before it steers the dance, s. About two beats:
 #: moves follow the feel of a passage, not single drum hits.
@@ -90,6 +93,16 @@ class MusicGrid:
             energy_fps=analysis.env_fps,
             sections_s=analysis.sections_s,
         )
+
+    def with_beats(
+        self, beats_s: Sequence[float], downbeats_s: Sequence[float] | None = None
+    ) -> MusicGrid:
+        """This grid with other beats (a beat file's, `quaddance.music.beat_file`): loudness
+        and sections stay. Downbeats are ``downbeats_s``, else every `BEATS_PER_BAR`-th beat
+        from the first; the tempo follows from the beats (`tempo_bpm`)."""
+        beats = np.asarray(beats_s, dtype=np.float64)
+        downbeats = beats[::BEATS_PER_BAR] if downbeats_s is None else downbeats_s
+        return dataclasses.replace(self, beats_s=beats, downbeats_s=downbeats)
 
     def normalized_energy(self, smooth_s: float = ENERGY_SMOOTH_S) -> np.ndarray:
         """Loudness mapped to [0, 1] by its 5th and 95th percentiles, then averaged over

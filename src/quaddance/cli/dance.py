@@ -8,7 +8,15 @@ from typing import Annotated, Any
 
 import typer
 
-from quaddance.cli._dance_spec import ModeOpt, MovesOpt, SeedOpt, StyleOpt, policy_dance_spec
+from quaddance.cli._dance_spec import (
+    BeatsOpt,
+    ModeOpt,
+    MovesOpt,
+    SeedOpt,
+    StyleOpt,
+    policy_dance_spec,
+    read_beats_option,
+)
 from quaddance.cli._exit import exit_without_teardown
 from quaddance.cli.options import PolicyOpt, PolicyRobotOpt
 
@@ -32,6 +40,7 @@ def dance_cmd(
     ] = False,
     style: StyleOpt = "mixed",
     moves: MovesOpt = None,
+    beats: BeatsOpt = None,
 ) -> None:
     """Make a robot (the Go1 unless --robot or --policy says otherwise) dance to a song:
     dance.mp4 (with the music), feet.png, metrics.json, dance.npz and rollout.npz."""
@@ -40,7 +49,8 @@ def dance_cmd(
     from quaddance.play.dance import DanceJob, run_dance
     from quaddance.play.metrics import summary_table
 
-    spec, policy = policy_dance_spec(robot, policy, mode, style, seed, moves)
+    beat_list = read_beats_option(beats, motion)
+    spec, policy = policy_dance_spec(robot, policy, mode, style, seed, moves, beat_list)
     if demo:
         if song is not None:
             raise typer.BadParameter("give a SONG or --demo, not both")

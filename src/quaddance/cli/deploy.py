@@ -7,7 +7,15 @@ from typing import Annotated
 
 import typer
 
-from quaddance.cli._dance_spec import ModeOpt, MovesOpt, SeedOpt, StyleOpt, policy_dance_spec
+from quaddance.cli._dance_spec import (
+    BeatsOpt,
+    ModeOpt,
+    MovesOpt,
+    SeedOpt,
+    StyleOpt,
+    policy_dance_spec,
+    read_beats_option,
+)
 from quaddance.cli.options import PolicyOpt, PowerLevelOpt, RobotIpOpt, RobotOpt, finite_in
 
 
@@ -26,6 +34,7 @@ def deploy_cmd(
     style: StyleOpt = "mixed",
     seed: SeedOpt = 0,
     moves: MovesOpt = None,
+    beats: BeatsOpt = None,
     robot: RobotOpt = "sim",
     policy: PolicyOpt = None,
     seconds: Annotated[
@@ -63,7 +72,8 @@ def deploy_cmd(
     )
 
     # The robot model is the policy's (``--robot`` here names the backend).
-    spec, policy = policy_dance_spec(None, policy, mode, style, seed, moves)
+    beat_list = read_beats_option(beats, motion, dance)
+    spec, policy = policy_dance_spec(None, policy, mode, style, seed, moves, beat_list)
     console = Console(stderr=True)
     job = DeployJob(
         out_dir=out,

@@ -1,0 +1,170 @@
+"""Beat times from another tool (``--beats FILE``), for a song where every tracker fails.
+
+Two formats:
+
+- text: one time in seconds a line; blank lines and ``#`` comments are skipped; a line may
+  hold more columns, separated by whitespace or commas, of which the first is the time (the
+  label exports of Sonic Visualiser and Audacity; Audacity's ``\\`` lines of a label's
+  frequency range are skipped);
+- JSON (a ``.json`` name, or a file that opens with ``{``): an object with ``beats_s``, a list
+  of seconds, and optionally ``downbeats_s``.
+
+`read_beats` checks everything that needs no song and names the file and the problem in one
+line (`quaddance.errors.InputFileError`); `BeatList.check_within` checks the song's length.
+The dance composer (`quaddance.pipeline.compose`) puts the beats in the choreographer's grid.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from quaddance.errors import InputFileError
+from quaddance.music.analysis import MIN_BEAT_GAP_S
+
+#: Fewest beats a file must give: one bar, the least the choreographer can dance to.
+MIN_BEATS = 4
+#: Farthest a downbeat may be from the nearest beat, s (a rounding of the same time).
+DOWNBEAT_ON_BEAT_S = 0.01
+
+_SEPARATOR = re.compile(r"[\s,]+")
+
+
+@dataclass(frozen=True)
+class BeatList:
+    """Beats read from a file.
+
+    Attributes:
+        path: the file, named in every error.
+        beats_s: beat times, s: strictly increasing, at least `MIN_BEAT_GAP_S` apart, >= 0.
+        downbeats_s: the file's downbeats, s, each one of ``beats_s``; None where it gives
+            none.
+    """
+
+    path: Path
+    beats_s: tuple[float, ...]
+    downbeats_s: tuple[float, ...] | None = None
+
+    @property
+    def name(self) -> str:
+        """The file's name, as a dance's ``source`` says it."""
+        return self.path.name
+
+    def check_within(self, duration_s: float) -> None:
+        """One line if a beat falls after the song's end, ``duration_s``."""
+        if self.beats_s[-1] > duration_s:
+            raise InputFileError(
+                self.path,
+                f"beat {self.beats_s[-1]:.3f} s is past the song's end ({duration_s:.3f} s)",
+            )
+
+
+def read_beats(path: Path) -> BeatList:
+    """The `BeatList` of a text or JSON beat file (see the module), checked."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputFileError(path, "no such file")
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError:
+        raise InputFileError(path, "not a text file of beat times") from None
+    except OSError as exc:
+        raise InputFileError(path, f"cannot read it ({exc.strerror or exc})") from None
+    if not text.strip():
+        raise InputFileError(path, "empty file: no beat times")
+    if path.suffix.lower() == ".json" or text.lstrip().startswith("{"):
+        beats, downbeats = _json_times(path, text)
+    else:
+        beats, downbeats = _text_times(path, text), None
+    _check_times(path, "beat", beats)
+    if len(beats) < MIN_BEATS:
+        raise InputFileError(path, f"{len(beats)} beats; at least {MIN_BEATS} are needed")
+    gaps = np.diff(beats)
+    if gaps.min() < MIN_BEAT_GAP_S:
+        i = int(np.argmin(gaps))
+        raise InputFileError(
+            path,
+            f"beats {beats[i]:.3f} s and {beats[i + 1]:.3f} s are {gaps[i]:.3f} s apart; "
+            f"beats must be at least {MIN_BEAT_GAP_S} s apart",
+        )
+    if downbeats is not None:
+        _check_times(path, "downbeat", downbeats)
+        _check_on_beats(path, beats, downbeats)
+    return BeatList(path, tuple(beats), None if downbeats is None else tuple(downbeats))
+
+
+def _text_times(path: Path, text: str) -> list[float]:
+    """The first column of each line that is not blank, a comment or an Audacity ``\\``
+    line; one line naming the line that is not a number."""
+    times = []
+    for n, line in enumerate(text.splitlines(), start=1):
+        field = _SEPARATOR.split(line.split("#", 1)[0].strip(), maxsplit=1)[0]
+        if field in ("", "\\"):
+            continue
+        try:
+            times.append(float(field))
+        except ValueError:
+            raise InputFileError(path, f"line {n}: {field[:40]!r} is not a number") from None
+    if not times:
+        raise InputFileError(path, "no beat times (only blank lines and comments)")
+    return times
+
+
+def _json_times(path: Path, text: str) -> tuple[list[float], list[float] | None]:
+    """``beats_s`` and ``downbeats_s`` (None if absent) of a JSON beat file."""
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise InputFileError(
+            path, f"not readable JSON ({exc.msg}, line {exc.lineno} column {exc.colno})"
+        ) from None
+    if not isinstance(data, dict) or "beats_s" not in data:
+        raise InputFileError(path, 'a JSON beat file is an object with "beats_s", a list of s')
+    downbeats = data.get("downbeats_s")
+    return (
+        _json_numbers(path, "beats_s", data["beats_s"]),
+        None if downbeats is None else _json_numbers(path, "downbeats_s", downbeats),
+    )
+
+
+def _json_numbers(path: Path, key: str, values: Any) -> list[float]:
+    if not isinstance(values, list):
+        raise InputFileError(path, f"{key} is not a list of times in seconds")
+    for i, v in enumerate(values):
+        if isinstance(v, bool) or not isinstance(v, int | float):
+            raise InputFileError(path, f"{key}[{i}] ({str(v)[:40]!r}) is not a number")
+    return [float(v) for v in values]
+
+
+def _check_times(path: Path, what: str, times: Sequence[float]) -> None:
+    """One line for the first time that is not finite, is negative, or does not come after
+    the one before."""
+    for i, t in enumerate(times):
+        if not math.isfinite(t):
+            raise InputFileError(path, f"{what} {i + 1} ({t}) is not a finite number")
+        if t < 0:
+            raise InputFileError(path, f"{what} {i + 1} ({t:.3f} s) is negative")
+        if i and t <= times[i - 1]:
+            raise InputFileError(
+                path,
+                f"{what} {i + 1} ({t:.3f} s) is not after {what} {i} ({times[i - 1]:.3f} s); "
+                "times must be strictly increasing",
+            )
+
+
+def _check_on_beats(path: Path, beats: Sequence[float], downbeats: Sequence[float]) -> None:
+    """One line for the first downbeat that is not one of the beats."""
+    beats_s = np.asarray(beats)
+    for t in downbeats:
+        nearest = float(beats_s[np.argmin(np.abs(beats_s - t))])
+        if abs(nearest - t) > DOWNBEAT_ON_BEAT_S:
+            raise InputFileError(
+                path, f"downbeat {t:.3f} s is not one of the beats (nearest {nearest:.3f} s)"
+            )
