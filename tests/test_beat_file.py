@@ -5,15 +5,14 @@ the tracker's."""
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from test_robot_choice import _one_line_error, _quaddance
 
 from quaddance.choreo.accents import accent_offsets_s, motion_accents_s
 from quaddance.choreo.grid import synthetic_grid
-from quaddance.cli import main
 from quaddance.dancefile import load_dance
 from quaddance.music.beat_file import BeatList, read_beats
 from quaddance.pipeline import DanceSpec, compose
@@ -25,14 +24,6 @@ def _write(tmp_path: Path, name: str, text: str) -> Path:
     path = tmp_path / name
     path.write_text(text, encoding="utf-8")
     return path
-
-
-def _quaddance(monkeypatch, capsys, *args: object) -> tuple[int, list[str]]:
-    """Run ``quaddance ARGS`` as the console does: (exit status, stderr lines)."""
-    monkeypatch.setattr(sys, "argv", ["quaddance", *map(str, args)])
-    with pytest.raises(SystemExit) as exc:
-        main()
-    return exc.value.code, capsys.readouterr().err.strip().splitlines()
 
 
 @pytest.mark.parametrize(
@@ -81,9 +72,7 @@ def test_each_bad_beat_file_is_one_line(monkeypatch, capsys, tmp_path, song_3s, 
     path.write_bytes(content if isinstance(content, bytes) else content.encode())
     code, err = _quaddance(monkeypatch, capsys, "choreograph", song_3s, "--beats", path,
                            "-o", tmp_path / "d.npz")  # fmt: skip
-    assert code == 2, err
-    assert len(err) == 1 and err[0].startswith(f"quaddance: error: {path}: "), err
-    assert problem in err[0], err
+    _one_line_error(code, err, f"quaddance: error: {path}: ", problem)
 
 
 @pytest.mark.parametrize(("command", "flags"), [("choreograph", ()), ("dance", ("--no-video",))])
@@ -111,7 +100,7 @@ def test_beats_with_a_motion_or_a_dance_is_a_usage_error(monkeypatch, capsys, tm
     beats = _write(tmp_path, "beats.txt", "\n".join(map(str, BEATS_S)))
     code, err = _quaddance(monkeypatch, capsys, *args, "--beats", beats, "--out", tmp_path / "o")
     assert code == 2, err
-    assert "--beats gives a SONG's beats: not with --motion or --dance" in " ".join(err), err
+    assert f"--beats gives a SONG's beats: not with {args[1]}" in " ".join(err), err
 
 
 def test_the_grid_takes_the_file_s_beats_and_keeps_the_music_s_loudness():

@@ -14,7 +14,6 @@ import typer
 from quaddance.cli.options import SeedRange
 
 if TYPE_CHECKING:
-    from quaddance.music.beat_file import BeatList
     from quaddance.pipeline import DanceSpec
     from quaddance.targets import TargetConfig
 
@@ -36,29 +35,6 @@ MovesOpt = Annotated[
     typer.Option(help="TOML file of extra body moves and styles (see choreo/moves_file.py)."),
 ]
 
-BeatsOpt = Annotated[
-    Path | None,
-    typer.Option(
-        help="The song's beats from another tool, in place of the tracker's: a text file, one "
-        "time (s) a line (a first column of a label export), or JSON with beats_s (and "
-        "downbeats_s).",
-    ),
-]
-
-
-def read_beats_option(
-    beats: Path | None, motion: Path | None, dance: Path | None = None
-) -> BeatList | None:
-    """The beat file of ``--beats``, read and checked now so that a bad one fails before any
-    work; a usage error with ``--motion`` or ``--dance``, which bring their own timing."""
-    if beats is None:
-        return None
-    if motion is not None or dance is not None:
-        raise typer.BadParameter("--beats gives a SONG's beats: not with --motion or --dance")
-    from quaddance.music.beat_file import read_beats
-
-    return read_beats(beats)
-
 
 def dance_spec(
     mode: str,
@@ -66,11 +42,14 @@ def dance_spec(
     seed: int,
     moves: Path | None,
     targets: TargetConfig | None = None,
-    beats: BeatList | None = None,
+    beats: Path | None = None,
+    timed: dict[str, Path | None] | None = None,
 ) -> DanceSpec:
     """The `DanceSpec` of the dance options, with ``targets``' other settings (its robot
-    among them) and ``beats`` (`read_beats_option`). The moves file is read here, against
-    that robot's trunk range, so that a bad one fails before any work."""
+    among them). The moves file and the ``--beats`` file are read here (the moves against
+    that robot's trunk range), so that a bad one fails before any work. ``timed``: the
+    command's options that bring their own timing (``{"--motion": path}``): ``--beats``
+    with one of them is a usage error."""
     from quaddance.layout import MODES
     from quaddance.pipeline import DanceSpec
     from quaddance.targets import TargetConfig
@@ -83,7 +62,15 @@ def dance_spec(
         from quaddance.choreo.moves_file import load_moves
 
         move_set = load_moves(moves, targets.robot.body_four_feet)
-    return DanceSpec(style=style, seed=seed, moves=move_set, targets=targets, beats=beats)
+    beat_list = None
+    if beats is not None:
+        given = [name for name, path in (timed or {}).items() if path is not None]
+        if given:
+            raise typer.BadParameter(f"--beats gives a SONG's beats: not with {given[0]}")
+        from quaddance.music.beat_file import read_beats
+
+        beat_list = read_beats(beats)
+    return DanceSpec(style=style, seed=seed, moves=move_set, targets=targets, beats=beat_list)
 
 
 def policy_dance_spec(
@@ -93,12 +80,15 @@ def policy_dance_spec(
     style: str,
     seed: int,
     moves: Path | None,
-    beats: BeatList | None = None,
+    beats: Path | None = None,
+    timed: dict[str, Path | None] | None = None,
 ) -> tuple[DanceSpec, Path]:
     """The `DanceSpec` of the dance options for the robot of ``--robot`` and ``--policy``,
-    and the policy file (`quaddance.play.policy.choose_policy`)."""
+    and the policy file (`quaddance.play.policy.choose_policy`); ``beats`` and ``timed`` as
+    in `dance_spec`."""
     from quaddance.play.policy import choose_policy
     from quaddance.targets import TargetConfig
 
     robot_cfg, path = choose_policy(robot, policy)
-    return dance_spec(mode, style, seed, moves, TargetConfig(robot=robot_cfg), beats), path
+    spec = dance_spec(mode, style, seed, moves, TargetConfig(robot=robot_cfg), beats, timed)
+    return spec, path

@@ -7,16 +7,8 @@ from typing import Annotated
 
 import typer
 
-from quaddance.cli._dance_spec import (
-    BeatsOpt,
-    ModeOpt,
-    MovesOpt,
-    SeedOpt,
-    StyleOpt,
-    dance_spec,
-    read_beats_option,
-)
-from quaddance.cli.options import RobotModelOpt, finite_in
+from quaddance.cli._dance_spec import ModeOpt, MovesOpt, SeedOpt, StyleOpt, dance_spec
+from quaddance.cli.options import BeatsOpt, RobotModelOpt, finite_in
 
 
 def choreograph_cmd(
@@ -70,7 +62,7 @@ def choreograph_cmd(
     if song is None and motion is None:
         raise typer.BadParameter("give a SONG, or --motion FILE (or both)")
     targets = TargetConfig(h0_m=h0, scale=scale, max_height_m=max_height, robot=get_robot(robot))
-    spec = dance_spec(mode, style, seed, moves, targets, read_beats_option(beats, motion))
+    spec = dance_spec(mode, style, seed, moves, targets, beats, {"--motion": motion})
     job = ChoreographJob(song=song, motion=motion, out=out, spec=spec, check=check)
     with Console(stderr=True).status("Analysing the music and choreographing..."):
         dance, analysis = run_choreograph(job)

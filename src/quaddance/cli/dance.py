@@ -8,17 +8,9 @@ from typing import Annotated, Any
 
 import typer
 
-from quaddance.cli._dance_spec import (
-    BeatsOpt,
-    ModeOpt,
-    MovesOpt,
-    SeedOpt,
-    StyleOpt,
-    policy_dance_spec,
-    read_beats_option,
-)
+from quaddance.cli._dance_spec import ModeOpt, MovesOpt, SeedOpt, StyleOpt, policy_dance_spec
 from quaddance.cli._exit import exit_without_teardown
-from quaddance.cli.options import PolicyOpt, PolicyRobotOpt
+from quaddance.cli.options import BeatsOpt, PolicyOpt, PolicyRobotOpt
 
 
 def dance_cmd(
@@ -49,8 +41,9 @@ def dance_cmd(
     from quaddance.play.dance import DanceJob, run_dance
     from quaddance.play.metrics import summary_table
 
-    beat_list = read_beats_option(beats, motion)
-    spec, policy = policy_dance_spec(robot, policy, mode, style, seed, moves, beat_list)
+    spec, policy = policy_dance_spec(
+        robot, policy, mode, style, seed, moves, beats, {"--motion": motion}
+    )
     if demo:
         if song is not None:
             raise typer.BadParameter("give a SONG or --demo, not both")

@@ -7,16 +7,15 @@ from typing import Annotated
 
 import typer
 
-from quaddance.cli._dance_spec import (
+from quaddance.cli._dance_spec import ModeOpt, MovesOpt, SeedOpt, StyleOpt, policy_dance_spec
+from quaddance.cli.options import (
     BeatsOpt,
-    ModeOpt,
-    MovesOpt,
-    SeedOpt,
-    StyleOpt,
-    policy_dance_spec,
-    read_beats_option,
+    PolicyOpt,
+    PowerLevelOpt,
+    RobotIpOpt,
+    RobotOpt,
+    finite_in,
 )
-from quaddance.cli.options import PolicyOpt, PowerLevelOpt, RobotIpOpt, RobotOpt, finite_in
 
 
 def deploy_cmd(
@@ -72,8 +71,8 @@ def deploy_cmd(
     )
 
     # The robot model is the policy's (``--robot`` here names the backend).
-    beat_list = read_beats_option(beats, motion, dance)
-    spec, policy = policy_dance_spec(None, policy, mode, style, seed, moves, beat_list)
+    timed = {"--motion": motion, "--dance": dance}
+    spec, policy = policy_dance_spec(None, policy, mode, style, seed, moves, beats, timed)
     console = Console(stderr=True)
     job = DeployJob(
         out_dir=out,

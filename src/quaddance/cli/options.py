@@ -35,6 +35,14 @@ PolicyRobotOpt = Annotated[
         "--policy's robot, else go1.",
     ),
 ]
+BeatsOpt = Annotated[
+    Path | None,
+    typer.Option(
+        help="The song's beats from another tool, in place of the tracker's: a text file, one "
+        "time (s) a line (a first column of a label export), or JSON with beats_s (and "
+        "downbeats_s).",
+    ),
+]
 RobotIpOpt = Annotated[str, typer.Option(help="go1: the robot's low-level IP.")]
 PowerLevelOpt = Annotated[
     int, typer.Option(help="go1: SDK PowerProtect level, 1 (10 %) to 10.", min=1, max=10)
