@@ -23,10 +23,10 @@ DEADLINES_S = {"push": 1.5, "freeze": 0.1, "nan": 0.06}
 
 def _deploy(policy, targets, seconds, inject=()) -> dict:
     from quaddance.deploy.runner import DeployOptions, Runner
-    from quaddance.deploy.sim_backend import SimRobot
+    from quaddance.deploy.sim_backend import sim_robot
 
     opts = DeployOptions(seconds=seconds, auto_start=True, inject=list(inject))
-    return Runner(SimRobot(), policy, targets, opts).run().summary
+    return Runner(sim_robot(), policy, targets, opts).run().summary
 
 
 def _mean_mae(front: dict | None) -> float | None:

@@ -206,10 +206,10 @@ def test_go1_backend_without_sdk_is_one_clear_error(monkeypatch):
 
 
 def run_sim(policy, targets, tmp_path: Path, seconds: float, inject=()) -> tuple[dict, dict]:
-    from quaddance.deploy.sim_backend import SimRobot
+    from quaddance.deploy.sim_backend import sim_robot
 
     runner = Runner(
-        SimRobot(),
+        sim_robot(),
         policy,
         targets,
         DeployOptions(seconds=seconds, auto_start=True, inject=list(inject)),

@@ -261,14 +261,10 @@ def test_playback_refuses_a_dance_for_another_robot(go2_policy):
         playback_env(compose(DanceSpec(), grid), OnnxPolicy.load(go2_policy))
 
 
-def test_deploy_sim_simulates_the_policys_robot(monkeypatch):
-    from quaddance.deploy import sim_backend
+def test_deploy_sim_simulates_the_policys_robot():
     from quaddance.deploy.job import BackendOptions, make_robot
 
-    made = []
-    monkeypatch.setattr(sim_backend, "SimRobot", lambda cfg: made.append(cfg) or cfg)
-    make_robot(BackendOptions(robot="sim"), GO2)
-    make_robot(BackendOptions(robot="sim"), GO1)
-    assert [cfg.robot for cfg in made] == [GO2.name, GO1.name]
+    made = [make_robot(BackendOptions(robot="sim"), robot) for robot in (GO2, GO1)]
+    assert [r.cfg.robot for r in made] == [GO2.name, GO1.name]  # not started: no process
     with pytest.raises(QuaddanceError, match="drives a Go1"):
         make_robot(BackendOptions(robot="go1"), GO2)

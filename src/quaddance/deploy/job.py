@@ -60,10 +60,11 @@ def make_robot(backend: BackendOptions, robot: RobotCfg):
     simulator simulates that robot), or a real Go1."""
     backend.check()
     if backend.robot == "sim":
-        from quaddance.deploy.sim_backend import SimRobot, SimRobotCfg
+        from quaddance.deploy.sim_backend import sim_robot
+        from quaddance.deploy.simulator import SimRobotCfg
 
         latency_ms = tuple(backend.sim_latency_ms)
-        return SimRobot(SimRobotCfg(latency_ms=latency_ms, robot=robot.name))
+        return sim_robot(SimRobotCfg(latency_ms=latency_ms, robot=robot.name))
     from quaddance.deploy.go1_backend import Go1Robot, load_sdk
 
     if robot != Go1Robot.robot_cfg:

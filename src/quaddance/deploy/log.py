@@ -220,7 +220,7 @@ def summarize(
         "priority": priority,
     }
     info = robot.info()
-    if robot.name == "sim":
+    if truth is not None:
         summary["sim"] = {**info, "late_ms": sim_late_ms}
     elif info:
         summary[robot.name] = info

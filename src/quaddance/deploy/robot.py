@@ -34,6 +34,8 @@ class Reading:
     #: Age of the reading when it was read, s, where the backend can tell (sim backend: both
     #: ends share the machine's monotonic clock); NaN on a real robot.
     age_s: float = float("nan")
+    battery_pct: float = float("nan")  #: state of charge where the robot reports it
+    remote_keys: int = 0  #: buttons held on the vendor's remote (`quaddance.deploy.remote`)
 
     def is_finite(self) -> bool:
         return all(

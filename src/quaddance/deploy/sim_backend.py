@@ -1,394 +1,102 @@
-"""A simulated Go1 for `quaddance deploy --robot sim`: another process, another simulator.
+"""quaddance's own robot protocol: `quaddance deploy --robot sim` (the default).
 
-Not the training simulator: MuJoCo at 1 kHz (training: 200 Hz) with torque motors, and the
-PD law computed on the "robot" side at `pd_hz` (>= 500 Hz, like the Go1 motor boards) from
-the last command received. The runner sees only what a Go1 reports (IMU quaternion and gyro,
-joint encoders, foot forces, a counter), with sensor noise, an encoder calibration offset
-and a network latency, and talks to this process only over UDP on 127.0.0.1.
-
-Fault hooks (`inject`): ``push`` (a shove that topples the robot), ``freeze`` (the state
-stream stops), ``nan`` (one state carries a NaN), ``lag`` (+50 ms on the state stream).
-
-Simulator truth for evaluation (foot heights, trunk height, tilt, falls) never goes to the
-runner during the run: this process writes it to a file when it ends.
-
-Run by `SimRobot`; ``python -m quaddance.deploy.sim_backend --help`` for the process side.
+The simulated robot (`quaddance.deploy.simulator`) and the runner exchange datagrams over
+UDP on 127.0.0.1 in a small format of our own: the states it reports, the commands it
+takes. The runner's side is `SimUdpRobot`; the robot's side is `OwnLink`, run by
+``python -m quaddance.deploy.sim_backend`` (started by `ProtocolSimRobot`).
 """
 
 from __future__ import annotations
 
-import argparse
-import dataclasses
-import json
-import os
 import socket
 import struct
-import subprocess
-import sys
-import tempfile
 import time
-from collections import deque
-from dataclasses import dataclass
-from pathlib import Path
+from typing import Any
 
-import mujoco
 import numpy as np
 
-from quaddance.children import ignore_sigint, sigint_blocked_for_children
-from quaddance.deploy.robot import FAULTS, JointCommand, Reading, Robot, realtime_priority
+from quaddance.deploy.robot import JointCommand, Reading, Robot
+from quaddance.deploy.simulator import (
+    LOOPBACK,
+    ProtocolSimRobot,
+    SensorState,
+    SimLink,
+    SimRobotCfg,
+    run_sim_process,
+)
 from quaddance.errors import QuaddanceError
-from quaddance.robots import GO1, get_robot
-from quaddance.sim.scene import SceneCfg, build_spec
-
-LOOPBACK = "127.0.0.1"
+from quaddance.robots import get_robot
 
 # Wire format (little-endian). State: kind, seq, robot time s, monotonic time of the
-# measurement s, quat 4, gyro 3, q 12, dq 12, foot force 4.
-_STATE = struct.Struct("<cIdd35f")
+# measurement s, quat 4, gyro 3, q 12, dq 12, foot force 4, battery %, remote buttons.
+_STATE = struct.Struct("<cIdd36fH")
 _CMD = struct.Struct("<cI60f")  # kind, seq, q 12, dq 12, kp 12, kd 12, tau_ff 12
-_FAULT = struct.Struct("<c8s")
-SIM_RT_PRIORITY = 20  #: above the runner's: the robot's own boards never wait for the PC
 
 
-@dataclass(frozen=True)
-class SimRobotCfg:
-    """The simulated robot. Noise figures are per reading, Gaussian standard deviations."""
+class OwnLink(SimLink):
+    """The simulated robot's side: states to the runner's port, commands from it."""
 
-    physics_dt_s: float = 0.001  #: 1 kHz, 5x finer than training's 0.005 s
-    pd_hz: float = 1000.0  #: robot-side PD rate; Go1 motor boards run >= 500 Hz (FACTS 2)
-    state_hz: float = 500.0  #: LowState rate of the SDK's 2 ms example loop (FACTS 6)
-    #: Sensor-to-actuation delay, drawn per message, split evenly between the state and the
-    #: command direction, ms: the range issue 9 names as realistic for a Go1 over the SDK
-    #: (training saw 0-30 ms of action lag).
-    latency_ms: tuple[float, float] = (5.0, 20.0)
-    lag_extra_ms: float = 50.0  #: added to the state stream by the ``lag`` fault
-    #: Half of legged_gym's uniform noise scales (0.01 rad, 1.5 rad/s, 0.2 rad/s), as a
-    #: standard deviation: Go1 encoders are much finer than that, its velocity estimate not.
-    encoder_noise_rad: float = 0.005
-    joint_vel_noise_rad_s: float = 0.3
-    gyro_noise_rad_s: float = 0.05
-    imu_tilt_noise_rad: float = 0.005  #: random small rotation of the IMU quaternion
-    encoder_offset_rad: float = 0.01  #: fixed calibration error per joint, uniform +-
-    foot_friction: float = 0.8  #: not training's 1.0: another floor
-    # Strong enough to topple any policy (the whole-body one rides out 2 m/s and 8 rad/s):
-    # the fault exists to show the safety layer catching a fall.
-    push_vel_m_s: tuple[float, float, float] = (0.0, 3.0, 0.0)  #: ``push`` fault, world frame
-    push_roll_rad_s: float = 16.0  #: ``push`` fault: roll rate added, rad/s
-    seed: int = 0
-    robot: str = GO1.name  #: the robot simulated (`quaddance.robots.ROBOTS`)
-
-    def to_json(self) -> str:
-        return json.dumps(dataclasses.asdict(self))
-
-    @classmethod
-    def from_json(cls, text: str) -> SimRobotCfg:
-        raw = json.loads(text)
-        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in raw.items()})
-
-
-def build_torque_model(cfg: SimRobotCfg) -> mujoco.MjModel:
-    """The Go1 scene with torque motors (limited to the Go1's effort limits) instead of the
-    training scene's position actuators; same bodies, joints, sensors and home pose."""
-    scene = SceneCfg(
-        robot=get_robot(cfg.robot), timestep_s=cfg.physics_dt_s, foot_friction=cfg.foot_friction
-    )
-    spec = build_spec(scene, visual=False)
-    for act in spec.actuators:
-        act.set_to_motor()  # ctrl is a torque, N m; forcerange (motor limits) stays
-    return spec.compile()
-
-
-# --- the robot process ---------------------------------------------------------------------
-
-
-class _SimProcess:
-    """The simulated robot: physics, motor boards, sensors, network, faults."""
-
-    def __init__(self, cfg: SimRobotCfg, runner_port: int) -> None:
-        self.cfg = cfg
-        self.rng = np.random.default_rng(cfg.seed)
-        self.model = build_torque_model(cfg)
-        self.data = mujoco.MjData(self.model)
-        mujoco.mj_resetDataKeyframe(self.model, self.data, self.model.key("home").id)
-        self.data.ctrl[:] = 0.0
-        mujoco.mj_forward(self.model, self.data)
-        robot = self.robot = get_robot(cfg.robot)
-        n = robot.num_joints
-        self.limits = np.asarray(robot.effort_limit_nm)
-        self.offset = self.rng.uniform(-1, 1, n) * cfg.encoder_offset_rad
-        self.runner = (LOOPBACK, runner_port)
+    def __init__(self, cfg: SimRobotCfg, options: dict[str, Any]) -> None:
+        self.n = get_robot(cfg.robot).num_joints
+        self.runner = (LOOPBACK, int(options["runner_port"]))
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind((LOOPBACK, 0))
         self.sock.setblocking(False)
-        # Motor boards start passive (no command yet): zero torque.
-        z = np.zeros(n)
-        self.cmd = JointCommand(self.data.qpos[7:].copy(), z, z.copy(), z.copy(), z.copy())
-        self.cmd_queue: deque[tuple[float, JointCommand]] = deque()
-        self.state_queue: deque[tuple[float, bytes]] = deque()
-        self.last_state_due = 0.0
-        self.last_cmd_due = 0.0
-        self.tau = np.zeros(n)
-        self.seq = 0
-        self.frozen = False
-        self.encoder_failed = False
-        self.extra_lag_s = 0.0
-        self.running = True
-        self.foot_geoms = [self.model.geom(g).id for g in robot.foot_geoms]
-        trunk = self.model.body(robot.trunk_body).id
-        self.trunk_geoms = {int(g) for g in np.flatnonzero(self.model.geom_bodyid == trunk)}
-        self.floor = self.model.geom("floor").id
-        self.foot_of_geom = {g: i for i, g in enumerate(self.foot_geoms)}
-        self.foot_sites = [self.model.site(s).id for s in robot.foot_sites]
-        self.noise_std = np.concatenate(
-            [
-                np.full(n, cfg.encoder_noise_rad),
-                np.full(n, cfg.joint_vel_noise_rad_s),
-                np.full(3, cfg.gyro_noise_rad_s),
-                np.full(3, cfg.imu_tilt_noise_rad),
-            ]
-        )
-        self._noise_quat = np.zeros(4)
-        self._force = np.zeros(6)
-        cap = 4096
-        self.truth: dict[str, np.ndarray] = {
-            "seq": np.zeros(cap, np.int64),
-            "time_s": np.zeros(cap),
-            "mono_s": np.zeros(cap),
-            "late_s": np.zeros(cap),
-            "feet_m": np.zeros((cap, 4)),
-            "base_height_m": np.zeros(cap),
-            "tilt_rad": np.zeros(cap),
-            "rpy_rad": np.zeros((cap, 3)),
-            "trunk_contact": np.zeros(cap, bool),
-            "tau_nm": np.zeros((cap, n)),
-        }
-        self.n_truth = 0
 
-    # network
-    def _delay_s(self) -> float:
-        lo, hi = self.cfg.latency_ms
-        return self.rng.uniform(lo, hi) / 2e3  # half of the loop delay in each direction
-
-    def _receive(self, now: float) -> None:
+    def poll(self) -> list[JointCommand | str]:
+        out: list[JointCommand | str] = []
         while True:
             try:
                 msg = self.sock.recv(1024)
             except BlockingIOError:
-                return
-            kind = msg[:1]
-            if kind == b"C" and len(msg) == _CMD.size:
-                v = np.asarray(_CMD.unpack(msg)[2:], dtype=np.float64).reshape(
-                    5, self.robot.num_joints
-                )
-                cmd = JointCommand(v[0], v[1], v[2], v[3], v[4])
-                # Messages keep their order: never due before the one sent earlier.
-                due = max(self.last_cmd_due, now + self._delay_s())
-                self.last_cmd_due = due
-                self.cmd_queue.append((due, cmd))
-            elif kind == b"F" and len(msg) == _FAULT.size:
-                self._fault(_FAULT.unpack(msg)[1].rstrip(b"\0").decode())
-            elif kind == b"Q":
-                self.running = False
+                return out
+            if msg[:1] != b"C" or len(msg) != _CMD.size:
+                self.rejected += 1
+                continue
+            v = np.asarray(_CMD.unpack(msg)[2:], dtype=np.float64).reshape(5, self.n)
+            out.append(JointCommand(v[0], v[1], v[2], v[3], v[4]))
 
-    def _fault(self, name: str) -> None:
-        if name == "push":
-            vx, vy, vz = self.cfg.push_vel_m_s
-            self.data.qvel[0:3] += (vx, vy, vz)
-            self.data.qvel[3] += self.cfg.push_roll_rad_s
-        elif name == "freeze":
-            self.frozen = True
-            self.state_queue.clear()  # a dead link delivers nothing more
-        elif name == "nan":
-            self.encoder_failed = True  # joint 0's encoder reads NaN from now on
-        elif name == "lag":
-            self.extra_lag_s += self.cfg.lag_extra_ms / 1e3
-
-    # motor boards
-    def _pd(self) -> None:
-        c, q, dq = self.cmd, self.data.qpos[7:], self.data.qvel[6:]
-        tau = c.kp * (c.q_rad - q) + c.kd * (c.dq_rad_s - dq) + c.tau_ff_nm
-        if not np.isfinite(tau).all():
-            tau = -2.0 * dq  # a board fed garbage falls back to damping
-        np.clip(tau, -self.limits, self.limits, out=self.tau)
-
-    # sensors
-    def _measure(self, mono_s: float) -> bytes:
-        """One LowState: noisy IMU and encoders, foot forces; records the truth beside it."""
-        d = self.data
-        z = self.rng.standard_normal(30) * self.noise_std
-        q = d.qpos[7:] + self.offset + z[:12]
-        dq = d.qvel[6:] + z[12:24]
-        gyro = d.qvel[3:6] + z[24:27]
-        # The IMU's orientation off by a small random rotation (axis-angle z[27:30]).
-        angle = float(np.linalg.norm(z[27:30]))
-        quat = d.qpos[3:7].copy()
-        if angle > 0:
-            mujoco.mju_axisAngle2Quat(self._noise_quat, z[27:30] / angle, angle)
-            mujoco.mju_mulQuat(quat, d.qpos[3:7], self._noise_quat)
-        forces = np.zeros(4)
-        trunk_contact = False
-        if d.ncon:
-            pairs = d.contact.geom[: d.ncon]
-            for i in np.flatnonzero((pairs == self.floor).any(axis=1)):
-                other = int(pairs[i, 1] if pairs[i, 0] == self.floor else pairs[i, 0])
-                foot = self.foot_of_geom.get(other)
-                if foot is not None:
-                    mujoco.mj_contactForce(self.model, d, int(i), self._force)
-                    forces[foot] += self._force[0]
-                elif other in self.trunk_geoms:
-                    trunk_contact = True
-        if self.encoder_failed:
-            q[0] = np.nan
-        self.seq += 1
-        self._record_truth(trunk_contact, mono_s)
-        return _STATE.pack(b"S", self.seq, d.time, mono_s, *quat, *gyro, *q, *dq, *forces)
-
-    def _record_truth(self, trunk_contact: bool, mono_s: float) -> None:
-        d, i = self.data, self.n_truth
-        if i == len(self.truth["seq"]):  # grow by doubling
-            self.truth = {k: np.concatenate([v, np.zeros_like(v)]) for k, v in self.truth.items()}
-        t = self.truth
-        t["seq"][i] = self.seq
-        t["time_s"][i] = d.time
-        t["mono_s"][i] = mono_s
-        t["late_s"][i] = time.monotonic() - mono_s  # how far physics ran behind the clock
-        t["feet_m"][i] = d.site_xpos[self.foot_sites, 2] - self.robot.foot_radius_m
-        t["base_height_m"][i] = d.qpos[2]
-        up_z = 1 - 2 * (d.qpos[4] ** 2 + d.qpos[5] ** 2)  # world z of the trunk's z axis
-        t["tilt_rad"][i] = np.arccos(np.clip(up_z, -1.0, 1.0))
-        w, x, y, z = d.qpos[3:7]
-        t["rpy_rad"][i] = (
-            np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y)),
-            np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0)),
-            np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)),
+    def publish(self, state: SensorState) -> None:
+        s = state
+        values = (*s.quat_wxyz, *s.gyro_rad_s, *s.joint_pos_rad, *s.joint_vel_rad_s)
+        packet = _STATE.pack(
+            b"S",
+            s.tick,
+            s.time_s,
+            s.mono_s,
+            *values,
+            *s.foot_force_n,
+            s.battery_pct,
+            s.remote_keys,
         )
-        t["trunk_contact"][i] = trunk_contact
-        t["tau_nm"][i] = self.tau
-        self.n_truth += 1
+        self.sock.sendto(packet, self.runner)
 
-    def run(self, truth_path: Path) -> None:
-        cfg, m, d = self.cfg, self.model, self.data
-        dt = cfg.physics_dt_s
-        pd_every = max(1, round(1.0 / (cfg.pd_hz * dt)))
-        state_every = max(1, round(1.0 / (cfg.state_hz * dt)))
-        parent = os.getppid()
-        t0 = time.monotonic()
-        k = 0
-        self.overruns = 0
-        while self.running:
-            now = time.monotonic()
-            self._receive(now)
-            due_steps = int((now - t0) / dt)
-            if due_steps - k > 100:
-                # More than 0.1 s behind (the machine stalled): drop the time, as a real
-                # robot's clock would not wait either, but keep stepping from here.
-                t0 += (due_steps - k - 100) * dt
-                due_steps = k + 100
-                self.overruns += 1
-            while k < due_steps:
-                step_time = t0 + k * dt
-                while self.cmd_queue and self.cmd_queue[0][0] <= step_time:
-                    self.cmd = self.cmd_queue.popleft()[1]
-                if k % pd_every == 0:
-                    self._pd()
-                d.ctrl[:] = self.tau
-                mujoco.mj_step(m, d)
-                k += 1
-                if k % state_every == 0 and not self.frozen:
-                    packet = self._measure(t0 + k * dt)
-                    due = max(self.last_state_due, t0 + k * dt + self._delay_s() + self.extra_lag_s)
-                    self.last_state_due = due
-                    self.state_queue.append((due, packet))
-            now = time.monotonic()
-            while self.state_queue and self.state_queue[0][0] <= now:
-                self.sock.sendto(self.state_queue.popleft()[1], self.runner)
-            if k % 100 == 0 and os.getppid() != parent:
-                break  # the runner died: a real robot would keep its last command; we stop
-            wake = t0 + (k + 1) * dt
-            if self.state_queue:
-                wake = min(wake, self.state_queue[0][0])
-            pause = wake - time.monotonic()
-            if pause > 0:
-                time.sleep(pause)
-        self._write_truth(truth_path)
-
-    def _write_truth(self, path: Path) -> None:
-        from quaddance.fileio import atomic_path
-
-        arrays = {k: v[: self.n_truth] for k, v in self.truth.items()}
-        arrays["overruns"] = np.asarray(self.overruns)
-        with atomic_path(path) as tmp:
-            np.savez(tmp, **arrays)
+    def close(self) -> None:
+        self.sock.close()
 
 
-def _main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description="Simulated Go1 for quaddance deploy (internal).")
-    ap.add_argument("--runner-port", type=int, required=True)
-    ap.add_argument("--truth", type=Path, required=True)
-    ap.add_argument("--config", default="{}", help="SimRobotCfg as JSON")
-    args = ap.parse_args(argv)
-    cfg = SimRobotCfg.from_json(args.config) if args.config != "{}" else SimRobotCfg()
-    # The runner's Ctrl-C reaches the whole process group; the robot keeps running until
-    # the runner has sent its damping commands and says quit.
-    ignore_sigint()
-    with realtime_priority(SIM_RT_PRIORITY):
-        proc = _SimProcess(cfg, args.runner_port)
-        proc.run(args.truth)
-
-
-# --- the runner's side ---------------------------------------------------------------------
-
-
-class SimRobot(Robot):
-    """`Robot` backed by `_SimProcess` in a child process, over UDP on 127.0.0.1."""
+class SimUdpRobot(Robot):
+    """The runner's side of the own protocol."""
 
     name = "sim"
 
-    def __init__(self, cfg: SimRobotCfg = SimRobotCfg()) -> None:
-        self.cfg = cfg
-        self._tmp = tempfile.TemporaryDirectory(prefix="quaddance-sim-")
-        self._truth_path = Path(self._tmp.name) / "truth.npz"
+    def __init__(self) -> None:
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._sock.bind((LOOPBACK, 0))
         self._sock.setblocking(False)
-        self._proc: subprocess.Popen | None = None
+        self.port = self._sock.getsockname()[1]
         self._robot_addr: tuple[str, int] | None = None
         self._latest: Reading | None = None
         self._cmd_seq = 0
-        self._truth: dict[str, np.ndarray] | None = None
-        self._stderr_path = Path(self._tmp.name) / "stderr.txt"
 
     def start(self, timeout_s: float = 30.0) -> Reading:
-        port = self._sock.getsockname()[1]
-        # It starts with SIGINT blocked, so a Ctrl-C while it imports cannot end it.
-        with open(self._stderr_path, "wb") as err, sigint_blocked_for_children():
-            self._proc = subprocess.Popen(
-                [
-                    sys.executable,
-                    "-m",
-                    "quaddance.deploy.sim_backend",
-                    "--runner-port",
-                    str(port),
-                    "--truth",
-                    str(self._truth_path),
-                    "--config",
-                    self.cfg.to_json(),
-                ],
-                stdin=subprocess.DEVNULL,
-                stdout=subprocess.DEVNULL,
-                stderr=err,
-            )
         end = time.monotonic() + timeout_s
         while time.monotonic() < end:
             reading = self.read()
             if reading is not None:
                 return reading
-            if self._proc.poll() is not None:
-                break
             time.sleep(0.005)
-        self.close()
-        lines = self._stderr_path.read_text(errors="replace").strip().splitlines()
-        raise QuaddanceError(f"the simulated robot did not start: {(lines or ['no output'])[-1]}")
+        raise QuaddanceError(f"no state from the simulated robot within {timeout_s:g} s")
 
     def read(self) -> Reading | None:
         while True:
@@ -400,9 +108,9 @@ class SimRobot(Robot):
                 continue
             self._robot_addr = addr
             v = _STATE.unpack(msg)
-            f = np.asarray(v[4:], dtype=np.float64)
             if self._latest is not None and v[1] <= self._latest.seq:
                 continue
+            f = np.asarray(v[4:40], dtype=np.float64)
             self._latest = Reading(
                 seq=v[1],
                 stamp_s=v[2],
@@ -412,6 +120,8 @@ class SimRobot(Robot):
                 joint_vel_rad_s=f[19:31],
                 foot_force_n=f[31:35],
                 age_s=time.monotonic() - v[3],
+                battery_pct=float(f[35]),
+                remote_keys=int(v[40]),
             )
         return self._latest
 
@@ -422,45 +132,17 @@ class SimRobot(Robot):
         values = np.concatenate([cmd.q_rad, cmd.dq_rad_s, cmd.kp, cmd.kd, cmd.tau_ff_nm])
         self._sock.sendto(_CMD.pack(b"C", self._cmd_seq, *values), self._robot_addr)
 
-    def inject(self, fault: str) -> bool:
-        if fault not in FAULTS or self._robot_addr is None:
-            return False
-        self._sock.sendto(_FAULT.pack(b"F", fault.encode()), self._robot_addr)
-        return True
-
     def close(self) -> None:
-        if self._proc is None:
-            return
-        if self._robot_addr is not None:
-            for _ in range(3):  # UDP on loopback does not drop, but a quit costs nothing
-                self._sock.sendto(b"Q", self._robot_addr)
-        try:
-            self._proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            self._proc.kill()
-            self._proc.wait()
-        self._proc = None
-        if self._truth_path.is_file():
-            with np.load(self._truth_path) as z:
-                self._truth = {k: z[k] for k in z.files}
         self._sock.close()
 
-    def info(self) -> dict:
-        return {
-            "physics_dt_s": self.cfg.physics_dt_s,
-            "pd_hz": self.cfg.pd_hz,
-            "latency_ms": list(self.cfg.latency_ms),
-            "state_hz": self.cfg.state_hz,
-            "foot_friction": self.cfg.foot_friction,
-        }
 
-    def truth(self) -> dict[str, np.ndarray] | None:
-        return self._truth
-
-    def __del__(self) -> None:
-        if getattr(self, "_proc", None) is not None:
-            self._proc.kill()
+def sim_robot(cfg: SimRobotCfg | None = None) -> ProtocolSimRobot:
+    """`deploy --robot sim`: the simulated robot over the own protocol."""
+    cfg = cfg or SimRobotCfg()
+    backend = SimUdpRobot()
+    link = {"runner_port": backend.port}
+    return ProtocolSimRobot("sim", backend, "quaddance.deploy.sim_backend", cfg, link)
 
 
 if __name__ == "__main__":
-    _main()
+    run_sim_process(OwnLink, description="quaddance's simulated robot, own protocol (internal)")
