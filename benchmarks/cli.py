@@ -445,22 +445,40 @@ def bench_long_cmd(
 
 @app.command("deploy")
 def bench_deploy_cmd(
-    out: Annotated[Path, typer.Option("--out", "-o", help="JSON results.")] = Path(
-        "benchmarks/results/deploy.json"
-    ),
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out",
+            "-o",
+            help="JSON results [default: benchmarks/results/deploy.json, deploy_BACKEND.json "
+            "for another backend].",
+        ),
+    ] = None,
     seconds: Annotated[
         float, typer.Option(help="Dance length, s.", callback=finite_in(1.0, 30.0))
     ] = 20.0,
+    robot: Annotated[
+        str,
+        typer.Option(
+            "--robot", help="Backend: sim, go1-sim or go2-sim (the shipped policy of its robot)."
+        ),
+    ] = "sim",
 ) -> None:
-    """Sim-to-sim: the demo song by `dance` and by `deploy --robot sim`; fault deadlines."""
+    """Sim-to-sim: songs by `dance` and by `deploy --robot BACKEND`; fault deadlines."""
     from rich.console import Console
 
     from benchmarks.deploy import run
+    from quaddance.deploy.job import SIMULATED
+    from quaddance.errors import QuaddanceError
     from quaddance.fileio import check_output_file, write_json
 
+    if robot not in SIMULATED:
+        raise QuaddanceError(f"--robot must be one of {', '.join(SIMULATED)}, got {robot!r}")
+    name = "deploy.json" if robot == "sim" else f"deploy_{robot}.json"
+    out = out or Path("benchmarks/results") / name
     check_output_file(out)
     console = Console(stderr=True)
-    results = run(seconds, log=lambda msg: console.log(msg))
+    results = run(seconds, log=lambda msg: console.log(msg), backend=robot)
     write_json(out, results)
     for name, r in results["songs"].items():
         d, s = r["dance"], r["deploy_sim"]

@@ -1,6 +1,8 @@
 """bench deploy: sim-to-sim. The same dance by `quaddance dance` (training simulator, no
-latency) and by `quaddance deploy --robot sim` (another simulator, real time, noise,
-latency, safety layer); then each fault's time to damping. Results as JSON."""
+latency) and by `quaddance deploy --robot BACKEND` (another simulator in real time, with
+noise, latency and the safety layer, reached through quaddance's own protocol (`sim`) or
+through a vendor SDK and that robot's protocol (`go1-sim`, `go2-sim`)); then each fault's
+time to damping. Results as JSON."""
 
 from __future__ import annotations
 
@@ -21,12 +23,13 @@ FAULT_RUNS: tuple[tuple[str, float, float], ...] = (
 DEADLINES_S = {"push": 1.5, "freeze": 0.1, "nan": 0.06}
 
 
-def _deploy(policy, targets, seconds, inject=()) -> dict:
+def _deploy(policy, targets, seconds, backend: str, inject=()) -> dict:
+    from quaddance.deploy.job import BackendOptions, make_robot
     from quaddance.deploy.runner import DeployOptions, Runner
-    from quaddance.deploy.sim_backend import sim_robot
 
+    robot = make_robot(BackendOptions(robot=backend), policy.task.scene.robot)
     opts = DeployOptions(seconds=seconds, auto_start=True, inject=list(inject))
-    return Runner(sim_robot(), policy, targets, opts).run().summary
+    return Runner(robot, policy, targets, opts).run().summary
 
 
 def _mean_mae(front: dict | None) -> float | None:
@@ -59,8 +62,8 @@ def _songs(tmp: Path, seconds: float) -> list[tuple[str, Path]]:
     return songs
 
 
-def _compare(policy, song: Path, seconds: float, log) -> tuple[dict, np.ndarray]:
-    """The song's first ``seconds`` by `dance` and by `deploy --robot sim`."""
+def _compare(policy, song: Path, seconds: float, backend: str, log) -> tuple[dict, np.ndarray]:
+    """The song's first ``seconds`` by `dance` and by `deploy --robot BACKEND`."""
     from quaddance.pipeline import DanceSpec, make_dance
     from quaddance.play.dance import feasible_max_height_m, spec_for_policy
     from quaddance.play.metrics import feasible_mask, tracking_metrics
@@ -78,8 +81,8 @@ def _compare(policy, song: Path, seconds: float, log) -> tuple[dict, np.ndarray]
         "rear_lift_mean_m": float(np.clip(feet[:, 2:], 0, None).mean()),
         "falls": sum(1 for t in played.falls_s if t < n / policy.task.policy_hz),
     }
-    log(f"  deploy --robot sim, {n / policy.task.policy_hz:.0f} s in real time")
-    dep = _deploy(policy, dance.targets_m[:n], n / policy.task.policy_hz)
+    log(f"  deploy --robot {backend}, {n / policy.task.policy_hz:.0f} s in real time")
+    dep = _deploy(policy, dance.targets_m[:n], n / policy.task.policy_hz, backend)
     deploy_res = {
         k: dep[k]
         for k in (
@@ -104,22 +107,26 @@ def _compare(policy, song: Path, seconds: float, log) -> tuple[dict, np.ndarray]
     }, dance.targets_m
 
 
-def run(seconds: float = 20.0, log: Callable[[str], None] = print) -> dict:
+def run(seconds: float = 20.0, log: Callable[[str], None] = print, backend: str = "sim") -> dict:
+    """Sim-to-sim on ``backend`` with the shipped policy of the robot it simulates (`sim`:
+    the Go1's)."""
+    from quaddance.deploy.job import BACKENDS
     from quaddance.play.policy import OnnxPolicy, shipped_policy_path
 
-    policy = OnnxPolicy.load(shipped_policy_path())
+    policy_path = shipped_policy_path(BACKENDS[backend] or "go1")
+    policy = OnnxPolicy.load(policy_path)
     songs = {}
     with tempfile.TemporaryDirectory() as tmp:
         for i, (name, path) in enumerate(_songs(Path(tmp), seconds)):
             log(f"{name}: dance, then deploy")
-            songs[name], targets = _compare(policy, path, seconds, log)
+            songs[name], targets = _compare(policy, path, seconds, backend, log)
             if i == 0:
                 demo_targets = targets
 
     faults = {}
     for fault, at_s, dance_s in FAULT_RUNS:
         log(f"fault {fault}@{at_s:g}")
-        s = _deploy(policy, demo_targets, dance_s, [(fault, at_s)])
+        s = _deploy(policy, demo_targets, dance_s, backend, [(fault, at_s)])
         (inj,) = s["injected"]
         damp = [e for e in s["events"] if e["to"] == "damp"]
         faults[fault] = {
@@ -133,7 +140,8 @@ def run(seconds: float = 20.0, log: Callable[[str], None] = print) -> dict:
         }
     return {
         "what": "feasible targets; dance = training simulator, deploy_sim = real-time sim robot",
-        "policy": str(shipped_policy_path().name),
+        "backend": backend,
+        "policy": policy_path.name,
         "songs": songs,
         "faults": faults,
         "machine": {"cpus": os.cpu_count(), "load_avg_1min": round(os.getloadavg()[0], 2)},

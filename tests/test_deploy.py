@@ -353,7 +353,7 @@ def test_deploy_refuses_bad_input_in_one_line(tmp_path):
     cli = [sys.executable, "-m", "quaddance.cli", "deploy"]
     for args, needle in [
         (["--demo", "--inject", "kick@1"], "--inject 'kick@1'"),
-        (["--demo", "--robot", "go1", "--inject", "push@1"], "--robot sim only"),
+        (["--demo", "--robot", "go1", "--inject", "push@1"], "never on a real one"),
         ([str(tmp_path / "missing.wav")], "missing.wav: no such file"),
     ]:
         done = subprocess.run(

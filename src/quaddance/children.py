@@ -64,8 +64,12 @@ def sigint_blocked_for_children() -> Iterator[None]:
 
 def ignore_sigint() -> None:
     """First thing in a helper started inside `sigint_blocked_for_children`: ignore SIGINT
-    (which also drops one that came while the helper started) and unblock it."""
+    (which also drops one that came while the helper started) and unblock it. SIGTERM gets
+    its default action back: an ignored signal survives exec, and a helper started by a
+    process that ignores SIGTERM (a command that has returned, inside a longer-lived
+    caller) could not be stopped by `terminate`, nor by multiprocessing at exit."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 

@@ -10,6 +10,8 @@ import typer
 from quaddance.cli._dance_spec import ModeOpt, MovesOpt, SeedOpt, StyleOpt, policy_dance_spec
 from quaddance.cli.options import (
     BeatsOpt,
+    DdsDomainOpt,
+    NetworkOpt,
     PolicyOpt,
     PowerLevelOpt,
     RobotIpOpt,
@@ -45,15 +47,27 @@ def deploy_cmd(
     ] = False,
     inject: Annotated[
         list[str] | None,
-        typer.Option(help="Fault at dance time T, s (sim only): push@T, freeze@T, nan@T, lag@T."),
+        typer.Option(
+            help="Fault at dance time T, s (simulated robots only): push@T, freeze@T, nan@T, lag@T."
+        ),
     ] = None,
+    dry_run: Annotated[
+        bool,
+        typer.Option(
+            "--dry-run",
+            help="Read, log and check the robot's state (joint ranges, IMU upright, battery) "
+            "for 3 s without sending any command; no dance.",
+        ),
+    ] = False,
     out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")] = Path("deploy_out"),
     robot_ip: RobotIpOpt = "192.168.123.10",
     power_level: PowerLevelOpt = 1,
+    network: NetworkOpt = None,
+    dds_domain: DdsDomainOpt = 0,
     sim_latency_ms: Annotated[
         tuple[float, float],
         typer.Option(
-            help="sim: sensor-to-motor delay range, ms (drawn per message).",
+            help="Simulated robots: sensor-to-motor delay range, ms (drawn per message).",
             callback=finite_in(0.0, 500.0),
         ),
     ] = (5.0, 20.0),
@@ -63,6 +77,7 @@ def deploy_cmd(
     from rich.console import Console
 
     from quaddance.deploy.job import (
+        BACKENDS,
         BackendOptions,
         DeployJob,
         parse_inject,
@@ -70,9 +85,10 @@ def deploy_cmd(
         summary_line,
     )
 
-    # The robot model is the policy's (``--robot`` here names the backend).
+    # ``--robot`` names the backend; the robot model is the backend's (sim: the policy's).
     timed = {"--motion": motion, "--dance": dance}
-    spec, policy = policy_dance_spec(None, policy, mode, style, seed, moves, beats, timed)
+    model = BACKENDS.get(robot)
+    spec, policy = policy_dance_spec(model, policy, mode, style, seed, moves, beats, timed)
     console = Console(stderr=True)
     job = DeployJob(
         out_dir=out,
@@ -85,9 +101,14 @@ def deploy_cmd(
         seconds=seconds,
         auto_start=auto_start,
         inject=parse_inject(inject),
-        backend=BackendOptions(robot, robot_ip, power_level, sim_latency_ms),
+        backend=BackendOptions(
+            robot, robot_ip, power_level, sim_latency_ms, network=network, dds_domain=dds_domain
+        ),
+        dry_run=dry_run,
     )
     summary, paths = run_deploy(job, status=lambda msg: console.log(msg))
     console.print(summary_line(summary))
     for name, path in paths.items():
         console.print(f"{name}: {path}")
+    if summary.get("dry_run") and not summary["ok"]:
+        raise typer.Exit(1)

@@ -8,7 +8,15 @@ from typing import Annotated
 import typer
 
 from quaddance.cli._dance_spec import ModeOpt, MovesOpt, SeedOpt, StyleOpt, policy_dance_spec
-from quaddance.cli.options import PolicyOpt, PowerLevelOpt, RobotIpOpt, RobotOpt, finite_in
+from quaddance.cli.options import (
+    DdsDomainOpt,
+    NetworkOpt,
+    PolicyOpt,
+    PowerLevelOpt,
+    RobotIpOpt,
+    RobotOpt,
+    finite_in,
+)
 
 
 def live_cmd(
@@ -57,24 +65,28 @@ def live_cmd(
     out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")] = Path("live_out"),
     robot_ip: RobotIpOpt = "192.168.123.10",
     power_level: PowerLevelOpt = 1,
+    network: NetworkOpt = None,
+    dds_domain: DdsDomainOpt = 0,
 ) -> None:
     """Dance to music as it plays: online beat tracking, a dance planned a bar ahead, the
     robot on the wall clock (same runner and safety layer as deploy). Writes live.json,
     rollout.npz, deploy.json and log.npz (and dance.mp4 with --video)."""
     from rich.console import Console
 
-    from quaddance.deploy.job import BackendOptions
+    from quaddance.deploy.job import BACKENDS, BackendOptions
     from quaddance.live.session import LiveJob, run_live, summary_line
 
-    # The robot model is the policy's (``--robot`` here names the backend).
-    spec, policy = policy_dance_spec(None, policy, mode, style, seed, moves)
+    # ``--robot`` names the backend; the robot model is the backend's (sim: the policy's).
+    spec, policy = policy_dance_spec(BACKENDS.get(robot), policy, mode, style, seed, moves)
     console = Console(stderr=True)
     job = LiveJob(
         out_dir=out,
         from_file=from_file,
         start_s=start,
         device=device,
-        backend=BackendOptions(robot, robot_ip, power_level),
+        backend=BackendOptions(
+            robot, robot_ip, power_level, network=network, dds_domain=dds_domain
+        ),
         policy=policy,
         seconds=seconds,
         viewer=viewer,

@@ -21,8 +21,17 @@ PolicyOpt = Annotated[
 RobotOpt = Annotated[
     str,
     typer.Option(
-        help="sim (the policy's robot, simulated in another process) or go1 (a real Go1)."
+        help="Backend: sim (the policy's robot simulated in another process, quaddance's own "
+        "protocol), go1-sim / go2-sim (a simulated Go1 / Go2 behind the robot's own protocol, "
+        "driven through the vendor's SDK), go1 / go2 (a real robot)."
     ),
+]
+NetworkOpt = Annotated[
+    str | None,
+    typer.Option(help="go2: the network interface wired to the robot (e.g. eth0)."),
+]
+DdsDomainOpt = Annotated[
+    int, typer.Option(help="go2: the DDS domain id (the robot's: 0).", min=0, max=232)
 ]
 RobotModelOpt = Annotated[
     str, typer.Option("--robot", help="Robot model: go1 or go2 (its limits and policy).")

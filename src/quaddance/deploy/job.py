@@ -8,13 +8,25 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from quaddance.errors import InputFileError, QuaddanceError
+from quaddance.fileio import check_output_file
 from quaddance.layout import FRONT_PAWS
 from quaddance.pipeline import DanceSpec, make_dance
 from quaddance.robots import RobotCfg
 from quaddance.targets import TargetConfig
 
-ROBOTS: tuple[str, ...] = ("sim", "go1")
+#: `deploy` / `live --robot`: each backend and the robot model it drives (None: the
+#: policy's). The simulators speak each robot's own protocol through its vendor's SDK.
+BACKENDS: dict[str, str | None] = {
+    "sim": None,  # quaddance's own protocol: fast, the default (never a real robot)
+    "go1-sim": "go1",  # Go1 low-level UDP wire format, through unitree_legged_sdk
+    "go2-sim": "go2",  # Go2 DDS topics, through unitree_sdk2
+    "go1": "go1",  # real robots
+    "go2": "go2",
+}
+SIMULATED: tuple[str, ...] = ("sim", "go1-sim", "go2-sim")  #: the backends faults reach
 
 
 def parse_inject(values: list[str] | None) -> list[tuple[str, float]]:
@@ -41,36 +53,63 @@ def parse_inject(values: list[str] | None) -> list[tuple[str, float]]:
 class BackendOptions:
     """Which robot to run on, and how to reach it (`quaddance deploy` and `live`)."""
 
-    robot: str = "sim"  #: one of `ROBOTS`
+    robot: str = "sim"  #: one of `BACKENDS`
     robot_ip: str = "192.168.123.10"  #: go1: the robot's low-level IP
     power_level: int = 1  #: go1: the SDK's PowerProtect level
-    sim_latency_ms: tuple[float, float] = (5.0, 20.0)  #: sim: sensor-to-motor delay range
+    sim_latency_ms: tuple[float, float] = (5.0, 20.0)  #: simulators: sensor-to-motor delay
+    network: str | None = None  #: go2: the network interface wired to the robot
+    dds_domain: int = 0  #: go2: the DDS domain (the robot's is 0)
 
     def check(self) -> None:
         """Refuse options that name no robot or an impossible delay range."""
-        if self.robot not in ROBOTS:
-            raise QuaddanceError(f"--robot must be one of {', '.join(ROBOTS)}, got {self.robot!r}")
+        if self.robot not in BACKENDS:
+            raise QuaddanceError(
+                f"--robot must be one of {', '.join(BACKENDS)}, got {self.robot!r}"
+            )
         lo, hi = self.sim_latency_ms
         if not 0 <= lo <= hi:
             raise QuaddanceError(f"--sim-latency-ms needs 0 <= LO <= HI, got {lo:g} {hi:g}")
+        if self.robot == "go2" and not self.network:
+            raise QuaddanceError("--robot go2 needs --network IFACE: the interface wired to it")
 
 
 def make_robot(backend: BackendOptions, robot: RobotCfg):
     """The robot of ``backend`` for the policy's ``robot``: simulated in another process (the
-    simulator simulates that robot), or a real Go1."""
+    simulator simulates that robot), or a real one."""
     backend.check()
+    model = BACKENDS[backend.robot]
+    if model is not None and model != robot.short_name:
+        raise QuaddanceError(
+            f"--robot {backend.robot} drives a {model.capitalize()}, but the policy is for "
+            f"{robot.name}"
+        )
     if backend.robot == "sim":
         from quaddance.deploy.sim_backend import sim_robot
-        from quaddance.deploy.simulator import SimRobotCfg
 
-        latency_ms = tuple(backend.sim_latency_ms)
-        return sim_robot(SimRobotCfg(latency_ms=latency_ms, robot=robot.name))
-    from quaddance.deploy.go1_backend import Go1Robot, load_sdk
+        return sim_robot(_sim_cfg(backend, robot))
+    if backend.robot in ("go1", "go1-sim"):
+        from quaddance.deploy.go1_backend import Go1Robot, load_sdk
 
-    if robot != Go1Robot.robot_cfg:
-        raise QuaddanceError(f"--robot go1 drives a Go1, but the policy is for {robot.name}")
-    load_sdk()  # the missing-SDK error before anything else happens
-    return Go1Robot(backend.robot_ip, backend.power_level)
+        load_sdk()  # the missing-SDK error before anything else happens
+        if backend.robot == "go1":
+            return Go1Robot(backend.robot_ip, backend.power_level)
+        from quaddance.deploy.go1_sim import go1_sim_robot
+
+        return go1_sim_robot(_sim_cfg(backend, robot), backend.power_level)
+    from quaddance.deploy.go2_backend import Go2Robot, load_sdk2
+
+    load_sdk2()
+    if backend.robot == "go2":
+        return Go2Robot(backend.dds_domain, backend.network)
+    from quaddance.deploy.go2_sim import go2_sim_robot
+
+    return go2_sim_robot(_sim_cfg(backend, robot))
+
+
+def _sim_cfg(backend: BackendOptions, robot: RobotCfg):
+    from quaddance.deploy.simulator import SimRobotCfg
+
+    return SimRobotCfg(latency_ms=tuple(backend.sim_latency_ms), robot=robot.name)
 
 
 @dataclass
@@ -90,6 +129,30 @@ class DeployJob:
     auto_start: bool = False
     inject: list[tuple[str, float]] = field(default_factory=list)
     backend: BackendOptions = field(default_factory=BackendOptions)
+    dry_run: bool = False  #: read and check the robot's state, send nothing, no dance
+
+
+def run_dry(job: DeployJob, status: Callable[[str], None]) -> tuple[dict, dict]:
+    """`deploy --dry-run`: deploy.json (the checks) and log.npz (the states read)."""
+    from quaddance.deploy.dry_run import dry_run
+    from quaddance.fileio import atomic_path, ensure_dir, write_json
+    from quaddance.play.policy import OnnxPolicy, shipped_policy_path
+
+    if job.song or job.demo or job.dance or job.motion or job.inject:
+        raise QuaddanceError(
+            "--dry-run dances nothing: no SONG, --demo, --dance, --motion or --inject"
+        )
+    policy = OnnxPolicy.load(job.policy or shipped_policy_path(job.spec.robot))
+    out = ensure_dir(job.out_dir)
+    paths = {"summary": out / "deploy.json", "log": out / "log.npz"}
+    for path in paths.values():
+        check_output_file(path)
+    robot_cfg = policy.task.scene.robot
+    summary, log = dry_run(make_robot(job.backend, robot_cfg), robot_cfg, status=status)
+    with atomic_path(paths["log"]) as tmp:
+        np.savez_compressed(tmp, **log)
+    write_json(paths["summary"], summary)
+    return summary, paths
 
 
 def run_deploy(job: DeployJob, status: Callable[[str], None] = lambda m: None) -> tuple[dict, dict]:
@@ -97,9 +160,12 @@ def run_deploy(job: DeployJob, status: Callable[[str], None] = lambda m: None) -
     from quaddance.dancefile import load_dance
     from quaddance.deploy.log import write_outputs
     from quaddance.deploy.runner import DeployOptions, Runner
-    from quaddance.fileio import check_output_file, ensure_dir
+    from quaddance.fileio import ensure_dir
     from quaddance.play.dance import spec_for_policy
     from quaddance.play.policy import OnnxPolicy, shipped_policy_path
+
+    if job.dry_run:
+        return run_dry(job, status)
 
     n_sources = (job.song is not None) + job.demo + (job.dance is not None)
     if n_sources > 1 or (job.dance and job.motion) or (n_sources == 0 and job.motion is None):
@@ -110,8 +176,11 @@ def run_deploy(job: DeployJob, status: Callable[[str], None] = lambda m: None) -
             "--seed choose the dance of a SONG, --demo or --motion"
         )
     job.backend.check()
-    if job.inject and job.backend.robot != "sim":
-        raise QuaddanceError("--inject works with --robot sim only (never on a real robot)")
+    if job.inject and job.backend.robot not in SIMULATED:
+        raise QuaddanceError(
+            f"--inject works with the simulated robots ({', '.join(SIMULATED)}), never on a "
+            "real one"
+        )
     if job.seconds is not None and not (math.isfinite(job.seconds) and job.seconds > 0):
         raise QuaddanceError(f"--seconds must be > 0, got {job.seconds}")
     for path in (job.song, job.motion, job.dance):
@@ -165,7 +234,13 @@ def run_deploy(job: DeployJob, status: Callable[[str], None] = lambda m: None) -
 
 def summary_line(summary: dict) -> str:
     """One line for a person from deploy.json's contents: the final state, the time danced,
-    falls, the front paws' tracking error and the tick time."""
+    falls, the front paws' tracking error and the tick time (a dry run: each check)."""
+    if summary.get("dry_run"):
+        checks = summary["checks"]
+        verdict = "passed" if summary["ok"] else "FAILED"
+        return f"dry run {verdict}: " + "; ".join(
+            f"{name} {'ok' if c['ok'] else 'FAILED'} ({c['detail']})" for name, c in checks.items()
+        )
     front = summary["front"] or {}
     mae = [front[f]["mae_m"] for f in ("fl", "fr") if f in front and front[f]["mae_m"] is not None]
     return (

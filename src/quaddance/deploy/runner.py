@@ -23,6 +23,7 @@ from quaddance.deploy.robot import JointCommand, Reading, Robot, realtime_priori
 from quaddance.deploy.safety import Safety, SafetyCfg, joint_range_rad
 from quaddance.deploy.state_machine import DanceStates
 from quaddance.deploy.states import DeployState
+from quaddance.errors import QuaddanceError
 from quaddance.play.policy import OnnxPolicy
 from quaddance.sim.kinematics import foot_pos_b
 
@@ -129,6 +130,9 @@ class Runner:
         self.status(f"connecting to the robot ({self.robot.name})")
         first = self.robot.start()
         sf, dt = self.safety, self.tick_s
+        if (why := sf.check_battery(first)) is not None:
+            self.robot.close()
+            raise QuaddanceError(f"{self.robot.name}: {why}")
         rows: dict[str, list] = {k: [] for k in LOG_KEYS}
         stop = StopSignals()
         states = DanceStates(

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from quaddance.deploy.remote import damp_pressed
 from quaddance.deploy.robot import JointCommand, Reading
 from quaddance.deploy.states import DeployState
 from quaddance.robots import RobotCfg
@@ -65,6 +66,9 @@ class SafetyCfg:
     damp_hold_s: float = 1.0  #: damping commands sent after a fault before exiting
     stale_ticks: int = 3  #: this many ticks in a row without a new state: damp
     inference_budget_s: float = 0.010  #: half a tick: past it the last command is held
+    #: A run does not start below this state of charge: the robot's own low-battery
+    #: behaviour must not take over in the middle of a dance.
+    min_battery_pct: float = 25.0
 
 
 @dataclass
@@ -142,6 +146,15 @@ class Safety:
             return f"no new state for {self._stale} ticks"
         if reading is not None and not reading.is_finite():
             return "NaN/Inf in the robot state"
+        if reading is not None and damp_pressed(reading.remote_keys):
+            return "the remote's L2 + B"
+        return None
+
+    def check_battery(self, reading: Reading) -> str | None:
+        """Why the run must not start (None: it may): a battery below `min_battery_pct`."""
+        pct = reading.battery_pct
+        if np.isfinite(pct) and pct < self.cfg.min_battery_pct:
+            return f"battery at {pct:.0f} %, below {self.cfg.min_battery_pct:g} %: charge it first"
         return None
 
     def check_posture(self, gravity_b: np.ndarray, trunk_height_m: float) -> str | None:
