@@ -1,0 +1,203 @@
+"""The Go1's low-level UDP wire format, pinned against unitree_legged_sdk 3.8's own binding.
+
+Everything runs on 127.0.0.1 with free ports; nothing is sent to a robot's address.
+"""
+
+from __future__ import annotations
+
+import socket
+import struct
+import time
+
+import numpy as np
+import pytest
+
+from quaddance.deploy import go1_wire as wire
+
+sdk = pytest.importorskip(
+    "unitree_legged_sdk.robot_interface",
+    reason="unitree-legged-sdk not installed (pip install 'quaddance[go1]')",
+)
+
+LOCALHOST = "127.0.0.1"
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind((LOCALHOST, 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture
+def robot_socket():
+    """A plain UDP socket standing where the robot would be."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind((LOCALHOST, 0))
+        s.settimeout(2.0)
+        yield s
+
+
+@pytest.fixture
+def sdk_udp(robot_socket):
+    """The SDK's low-level UDP object, its target the robot socket; (udp, its local port)."""
+    local_port = free_port()
+    udp = sdk.UDP(wire.LOWLEVEL, local_port, LOCALHOST, robot_socket.getsockname()[1])
+    yield udp, local_port
+    del udp
+
+
+def sdk_low_cmd_datagram(udp, robot_socket, low_cmd) -> bytes:
+    udp.SetSend(low_cmd)
+    udp.Send()
+    return robot_socket.recvfrom(4096)[0]
+
+
+def test_layout_sizes_and_offsets():
+    assert (wire.HEADER.size, wire.MOTOR_CMD.size, wire.MOTOR_STATE.size) == (22, 27, 32)
+    assert (wire.IMU.size, wire.BMS_STATE.size, wire.STATE_TAIL.size) == (53, 24, 64)
+    assert (wire.CMD_MOTORS_AT, wire.CMD_BMS_AT, wire.CMD_REMOTE_AT) == (22, 562, 566)
+    assert (wire.CMD_CRC_AT, wire.LOW_CMD_LENGTH) == (610, 614)
+    assert (wire.IMU_AT, wire.STATE_MOTORS_AT, wire.STATE_BMS_AT, wire.BMS_SOC_AT) == (
+        22,
+        75,
+        715,
+        718,
+    )
+    assert (wire.STATE_TAIL_AT, wire.STATE_CRC_AT, wire.LOW_STATE_LENGTH) == (739, 803, 807)
+
+
+def test_sdk_low_cmd_decodes_to_every_field(sdk_udp, robot_socket):
+    udp, _ = sdk_udp
+    low = sdk.LowCmd()
+    udp.InitCmdData(low)
+    # Distinct values per slot, each exact on the wire (tau in 1/256, Kp in 1/32, Kd in 1/16).
+    for i in range(wire.NUM_MOTOR_SLOTS):
+        m = low.motorCmd[i]
+        m.mode = wire.SERVO_MODE if i % 3 else i
+        m.q = 0.25 * i - 2.0
+        m.dq = -0.5 * i + 1.0
+        m.tau = (37 * i - 300) / 256
+        m.Kp = (51 * i + 3) / 32
+        m.Kd = (7 * i + 1) / 16
+    data = sdk_low_cmd_datagram(udp, robot_socket, low)
+    assert len(data) == wire.LOW_CMD_LENGTH
+    frame = wire.decode_low_cmd(data)
+    assert frame.crc_ok and frame.valid
+    assert frame.head == b"\xfe\xef" and frame.level_flag == 0xFF
+    for i in range(wire.NUM_MOTOR_SLOTS):
+        m = low.motorCmd[i]
+        sent = (m.mode, m.q, m.dq, m.Kp, m.Kd, m.tau)
+        got = (frame.mode[i], frame.q[i], frame.dq[i], frame.kp[i], frame.kd[i], frame.tau[i])
+        assert got == sent, f"motor slot {i}"
+
+
+def test_sdk_packs_tau_kp_kd_as_truncated_fixed_point(sdk_udp, robot_socket):
+    udp, _ = sdk_udp
+    low = sdk.LowCmd()
+    udp.InitCmdData(low)
+    low.motorCmd[0].tau, low.motorCmd[0].Kp, low.motorCmd[0].Kd = -0.3, 20.3, 0.55
+    low.motorCmd[1].tau = 200.0  # past int16 / 256: wraps, as the SDK's C casts do
+    frame = wire.decode_low_cmd(sdk_low_cmd_datagram(udp, robot_socket, low))
+    assert (frame.tau[0], frame.kp[0], frame.kd[0]) == (-76 / 256, 649 / 32, 8 / 16)
+    assert frame.tau[1] == -56.0
+
+
+def test_crc_is_the_sdks_and_a_bad_one_is_seen(sdk_udp, robot_socket):
+    udp, _ = sdk_udp
+    low = sdk.LowCmd()
+    udp.InitCmdData(low)
+    data = sdk_low_cmd_datagram(udp, robot_socket, low)
+    assert struct.unpack_from("<I", data, wire.CMD_CRC_AT)[0] == wire.crc32(data)
+    corrupt = bytearray(data)
+    corrupt[wire.CMD_MOTORS_AT + 1] ^= 0x01
+    frame = wire.decode_low_cmd(bytes(corrupt))
+    assert not frame.crc_ok and not frame.valid
+    with pytest.raises(wire.WireError):
+        wire.decode_low_cmd(data[:-1])
+
+
+RPY_RAD = (0.3, -0.2, 0.5)
+
+
+def _quat_from_rpy(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """w x y z of the Z-Y-X rotation (yaw, then pitch, then roll)."""
+    cr, sr = np.cos(roll / 2), np.sin(roll / 2)
+    cp, sp = np.cos(pitch / 2), np.sin(pitch / 2)
+    cy, sy = np.cos(yaw / 2), np.sin(yaw / 2)
+    return np.array(
+        [
+            cr * cp * cy + sr * sp * sy,
+            sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy,
+        ]
+    )
+
+
+def _state_kwargs(tick: int) -> dict:
+    i = np.arange(12)
+    return dict(
+        tick=tick,
+        quat_wxyz=_quat_from_rpy(*RPY_RAD),
+        gyro_rad_s=np.array([0.5, -1.25, 2.0]),
+        accel_m_s2=np.array([0.25, -0.75, 9.5]),
+        q=0.125 * i - 0.75,
+        dq=-0.375 * i + 1.5,
+        tau_est=(29 * i - 150) / 256,
+        foot_force=np.array([11, -22, 33, 444]),
+        wireless_remote=bytes(range(100, 140)),
+        battery_soc=77,
+    )
+
+
+def _sdk_receives(udp, local_port: int, robot_socket, data: bytes, state) -> int:
+    """Send ``data`` from the robot's address (the SDK's socket is connected to it and takes
+    nothing from elsewhere); the SDK's receive code and what it decoded into ``state``."""
+    robot_socket.sendto(data, (LOCALHOST, local_port))
+    time.sleep(0.02)
+    rc = udp.Recv()
+    udp.GetRecv(state)
+    return rc
+
+
+def test_state_encoded_here_decodes_in_the_sdk_to_every_field(sdk_udp, robot_socket):
+    udp, local_port = sdk_udp
+    kw = _state_kwargs(tick=4242)
+    data = wire.encode_low_state(**kw)
+    assert len(data) == wire.LOW_STATE_LENGTH
+    state = sdk.LowState()
+    assert _sdk_receives(udp, local_port, robot_socket, data, state) == 0
+    f32 = lambda a: np.asarray(a, dtype=np.float32).tolist()  # noqa: E731
+    assert state.tick == 4242
+    assert state.imu.quaternion == f32(kw["quat_wxyz"])
+    assert state.imu.gyroscope == f32(kw["gyro_rad_s"])
+    assert state.imu.accelerometer == f32(kw["accel_m_s2"])
+    np.testing.assert_allclose(state.imu.rpy, RPY_RAD, atol=1e-6)
+    motors = [state.motorState[i] for i in range(12)]
+    assert [m.q for m in motors] == f32(kw["q"])
+    assert [m.dq for m in motors] == f32(kw["dq"])
+    assert [m.tauEst for m in motors] == f32(kw["tau_est"])
+    assert all(m.mode == wire.SERVO_MODE for m in motors)
+    assert list(state.footForce) == kw["foot_force"].tolist()
+    assert bytes(state.wirelessRemote) == kw["wireless_remote"]
+    assert state.bms.SOC == 77
+
+
+def test_sdk_keeps_its_last_state_on_a_bad_crc_head_length_or_sender(sdk_udp, robot_socket):
+    udp, local_port = sdk_udp
+    state = sdk.LowState()
+    good = wire.encode_low_state(**_state_kwargs(tick=1))
+    assert _sdk_receives(udp, local_port, robot_socket, good, state) == 0
+    bad_crc = bytearray(wire.encode_low_state(**_state_kwargs(tick=2)))
+    bad_crc[wire.STATE_CRC_AT] ^= 0x01
+    bad_head = bytearray(wire.encode_low_state(**_state_kwargs(tick=3)))
+    bad_head[0] = 0
+    short = wire.encode_low_state(**_state_kwargs(tick=4))[:-1]
+    for data, rc in ((bad_crc, -3), (bad_head, -1), (short, -3)):
+        assert _sdk_receives(udp, local_port, robot_socket, bytes(data), state) == rc
+        assert state.tick == 1
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as elsewhere:
+        elsewhere.bind((LOCALHOST, 0))
+        good_elsewhere = wire.encode_low_state(**_state_kwargs(tick=5))
+        assert _sdk_receives(udp, local_port, elsewhere, good_elsewhere, state) == -1
+    assert state.tick == 1
