@@ -21,6 +21,7 @@ from types import ModuleType
 
 import numpy as np
 
+from quaddance.deploy.remote import decode_remote
 from quaddance.deploy.robot import JointCommand, Reading, Robot
 from quaddance.errors import QuaddanceError
 from quaddance.robots import GO1, RobotCfg
@@ -61,7 +62,8 @@ def fill_low_cmd(low_cmd, cmd: JointCommand, robot: RobotCfg) -> None:
 def reading_from_low_state(state, robot: RobotCfg) -> Reading:
     """An SDK ``LowState`` as a `Reading` (model joint order, quaddance foot order).
 
-    ``seq`` is the robot's millisecond ``tick``: it advances with every new state.
+    ``seq`` is the robot's millisecond ``tick``: it advances with every new state. The battery
+    is the BMS's state of charge; the remote's buttons come from ``wirelessRemote``.
     """
     ms = state.motorState
     motors = list(zip(robot.sdk_joint_index, robot.sdk_joint_sign, strict=True))
@@ -76,6 +78,8 @@ def reading_from_low_state(state, robot: RobotCfg) -> Reading:
         joint_pos_rad=q,
         joint_vel_rad_s=dq,
         foot_force_n=force[list(robot.sdk_foot_index)],  # raw sensor units on a Go1, not newtons
+        battery_pct=float(state.bms.SOC),
+        remote_keys=decode_remote(state.wirelessRemote),
     )
 
 
