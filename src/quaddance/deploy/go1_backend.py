@@ -145,8 +145,9 @@ class Go1Robot(Robot):
             if cmd is not None:
                 fill_low_cmd(self._low_cmd, cmd, self.robot_cfg)
                 self._safe.PositionLimit(self._low_cmd)
-                # Non-zero: the SDK intervened (it scales the command down and warns).
-                if self._safe.PowerProtect(self._low_cmd, self._low_state, self.power_level):
+                # 1: within the limit; -1: over it for several ticks, and the SDK has set
+                # every motor idle (mode 0x00) and printed an error.
+                if self._safe.PowerProtect(self._low_cmd, self._low_state, self.power_level) < 0:
                     self.power_protect_trips += 1
             self._udp.SetSend(self._low_cmd)
             self._udp.Send()
