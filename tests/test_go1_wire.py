@@ -5,14 +5,22 @@ Everything runs on 127.0.0.1 with free ports; nothing is sent to a robot's addre
 
 from __future__ import annotations
 
+import dataclasses
 import socket
 import struct
+import threading
 import time
 
 import numpy as np
 import pytest
 
 from quaddance.deploy import go1_wire as wire
+from quaddance.deploy.go1_backend import Go1Robot
+from quaddance.deploy.go1_sim import Go1UdpLink, free_udp_port, go1_sim_robot
+from quaddance.deploy.remote import DAMP_KEYS
+from quaddance.deploy.robot import JointCommand
+from quaddance.deploy.simulator import SensorState
+from quaddance.robots import GO1
 
 sdk = pytest.importorskip(
     "unitree_legged_sdk.robot_interface",
@@ -20,12 +28,6 @@ sdk = pytest.importorskip(
 )
 
 LOCALHOST = "127.0.0.1"
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind((LOCALHOST, 0))
-        return s.getsockname()[1]
 
 
 @pytest.fixture
@@ -40,7 +42,7 @@ def robot_socket():
 @pytest.fixture
 def sdk_udp(robot_socket):
     """The SDK's low-level UDP object, its target the robot socket; (udp, its local port)."""
-    local_port = free_port()
+    local_port = free_udp_port()
     udp = sdk.UDP(wire.LOWLEVEL, local_port, LOCALHOST, robot_socket.getsockname()[1])
     yield udp, local_port
     del udp
@@ -201,3 +203,158 @@ def test_sdk_keeps_its_last_state_on_a_bad_crc_head_length_or_sender(sdk_udp, ro
         good_elsewhere = wire.encode_low_state(**_state_kwargs(tick=5))
         assert _sdk_receives(udp, local_port, elsewhere, good_elsewhere, state) == -1
     assert state.tick == 1
+
+
+# --- the go1-sim link: the robot's side of the wire ------------------------------------------
+
+# Left and right legs swapped, hips mirrored: a map that is not the identity, so both sides
+# must use the same table (hips are symmetric, so the SDK's PositionLimit keeps the values).
+MIRRORED = dataclasses.replace(
+    GO1,
+    sdk_joint_index=(3, 4, 5, 0, 1, 2, 9, 10, 11, 6, 7, 8),
+    sdk_joint_sign=(-1.0, 1.0, 1.0) * 4,
+    sdk_foot_index=(0, 1, 2, 3),
+)
+
+
+def sensor_state(tick: int) -> SensorState:
+    """Distinct values in every field the Go1's LowState carries."""
+    i = np.arange(12)
+    return SensorState(
+        tick=tick,
+        time_s=0.002 * tick,
+        mono_s=time.monotonic(),
+        quat_wxyz=_quat_from_rpy(*RPY_RAD),
+        gyro_rad_s=np.array([0.5, -1.25, 2.0]),
+        accel_m_s2=np.array([0.25, -0.75, 9.5]),
+        joint_pos_rad=np.asarray(GO1.nominal_joint_pos_rad) + 0.01 * i,
+        joint_vel_rad_s=0.125 * i - 0.5,
+        joint_tau_nm=(29 * i - 150) / 256,
+        foot_force_n=np.array([10.0, 20.0, 30.0, 40.0]),
+        battery_pct=64.0,
+        remote_keys=DAMP_KEYS,
+    )
+
+
+@pytest.fixture
+def link():
+    link = Go1UdpLink(MIRRORED, free_udp_port())
+    yield link
+    link.close()
+
+
+def test_link_refuses_bad_datagrams_and_idles_motors_out_of_servo_mode(link, sdk_udp, robot_socket):
+    udp, _ = sdk_udp
+    low = sdk.LowCmd()
+    udp.InitCmdData(low)
+    for i in range(12):
+        m = low.motorCmd[i]
+        m.mode = 0 if i == 4 else wire.SERVO_MODE  # SDK motor 4: model joint 1 (FR thigh)
+        m.q, m.dq, m.Kp, m.Kd, m.tau = 0.5, 0.25, 20.0, 0.5, 1.0
+    low.motorCmd[6].q = wire.POS_STOP_F  # model joint 9 (RL hip): its position loop off
+    good = sdk_low_cmd_datagram(udp, robot_socket, low)
+    bad_crc = bytearray(good)
+    bad_crc[wire.CMD_MOTORS_AT + 2] ^= 0x10
+    high_level = bytearray(good)
+    high_level[2] = 0xEE
+    struct.pack_into("<I", high_level, wire.CMD_CRC_AT, wire.crc32(bytes(high_level)))
+    assert link.peer is None
+    link.publish(sensor_state(tick=1))  # before any command nobody is answered: no error
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sender:
+        for data in (bytes(bad_crc), good[:-2], good + bytes(4), bytes(high_level), good):
+            sender.sendto(data, (LOCALHOST, link.port))
+        time.sleep(0.02)
+        (cmd,) = link.poll()
+        assert link.rejected == 4
+        assert link.peer == (LOCALHOST, sender.getsockname()[1])
+    sign = np.array(MIRRORED.sdk_joint_sign)
+    servo = np.ones(12)
+    servo[1] = 0
+    position = servo.copy()
+    position[9] = 0
+    np.testing.assert_array_equal(cmd.q_rad, 0.5 * sign * position)
+    np.testing.assert_array_equal(cmd.kp, 20 * position)
+    np.testing.assert_array_equal(cmd.dq_rad_s, 0.25 * sign * servo)
+    np.testing.assert_array_equal(cmd.kd, 0.5 * servo)
+    np.testing.assert_array_equal(cmd.tau_ff_nm, sign * servo)
+
+
+def test_go1_backend_drives_the_link_through_the_sdk(link):
+    """The unchanged `Go1Robot` (the SDK binding, its PositionLimit and PowerProtect) against
+    the link: commands and states cross the wire with the joint map both sides share."""
+    robot = Go1Robot(robot_ip=LOCALHOST, robot_port=link.port, local_port=free_udp_port())
+    robot.robot_cfg = MIRRORED
+    state = sensor_state(tick=1)
+    received: list[JointCommand] = []
+    stop = threading.Event()
+
+    def robot_side() -> None:  # the simulated robot's loop: commands in, a state out
+        while not stop.is_set():
+            received.extend(link.poll())
+            state.tick += 1
+            link.publish(state)
+            time.sleep(0.002)
+
+    thread = threading.Thread(target=robot_side, daemon=True)
+    thread.start()
+    try:
+        first = robot.start(timeout_s=5.0)
+        # Before the runner's first command the SDK sends its initial one: no torque.
+        assert received and not any(
+            np.any(c.kp) or np.any(c.kd) or np.any(c.tau_ff_nm) for c in received
+        )
+        i = np.arange(12)
+        sent = JointCommand(
+            q_rad=np.asarray(GO1.nominal_joint_pos_rad) + 0.02 * i - 0.1,
+            dq_rad_s=0.25 * i - 1.0,
+            kp=(640 + 3 * i) / 32,
+            kd=(8 + i) / 16,
+            tau_ff_nm=(37 * i - 200) / 256,
+        )
+        robot.send(sent)
+        end = time.monotonic() + 2.0
+        while time.monotonic() < end and not (received and np.any(received[-1].kp)):
+            time.sleep(0.01)
+        reading = robot.read()
+    finally:
+        robot.close()
+        stop.set()
+        thread.join(timeout=1.0)
+    assert robot.power_protect_trips == 0
+    got = received[-1]
+    np.testing.assert_allclose(got.q_rad, sent.q_rad, rtol=0, atol=1e-6)  # float32 on the wire
+    np.testing.assert_allclose(got.dq_rad_s, sent.dq_rad_s, rtol=0, atol=1e-6)
+    np.testing.assert_array_equal(got.kp, sent.kp)
+    np.testing.assert_array_equal(got.kd, sent.kd)
+    np.testing.assert_array_equal(got.tau_ff_nm, sent.tau_ff_nm)
+    assert link.rejected == 0
+    for r in (first, reading):
+        assert r.seq > 1
+        np.testing.assert_allclose(r.joint_pos_rad, state.joint_pos_rad, rtol=0, atol=1e-6)
+        np.testing.assert_allclose(r.joint_vel_rad_s, state.joint_vel_rad_s, rtol=0, atol=1e-6)
+        np.testing.assert_allclose(r.quat_wxyz, state.quat_wxyz, rtol=0, atol=1e-6)
+        np.testing.assert_allclose(r.gyro_rad_s, state.gyro_rad_s, rtol=0, atol=1e-6)
+        np.testing.assert_array_equal(r.foot_force_n, state.foot_force_n)
+        assert (r.battery_pct, r.remote_keys) == (64.0, DAMP_KEYS)
+
+
+def test_go1_sim_process_answers_the_backend_and_counts_what_it_applied():
+    """``python -m quaddance.deploy.go1_sim`` behind `ProtocolSimRobot`, driven by `Go1Robot`."""
+    robot = go1_sim_robot()
+    try:
+        first = robot.start(timeout_s=30.0)
+        assert (first.battery_pct, first.remote_keys) == (90.0, 0)
+        assert robot.press(DAMP_KEYS)
+        damping = JointCommand.damping(first.joint_pos_rad, GO1.safety_limits.damp_kd)
+        end = time.monotonic() + 0.5
+        while time.monotonic() < end:
+            robot.send(damping)
+            time.sleep(0.02)
+        reading = robot.read()
+    finally:
+        robot.close()
+    assert reading.seq > first.seq and reading.remote_keys == DAMP_KEYS
+    counts = robot.received()
+    assert counts["torque_commands"] > 0 and counts["rejected"] == 0
+    assert counts["commands"] > counts["torque_commands"]  # the SDK's idle ones came first
+    assert reading.seq in robot.truth()["seq"]
