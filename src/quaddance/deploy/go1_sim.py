@@ -71,7 +71,7 @@ def low_state_datagram(state: SensorState, robot: RobotCfg) -> bytes:
         tau_est=tau,
         foot_force=force,
         wireless_remote=encode_remote(state.remote_keys),
-        battery_soc=int(np.clip(round(state.battery_pct), 0, 100)),
+        battery_soc=min(max(round(state.battery_pct), 0), 100),
     )
 
 

@@ -20,6 +20,7 @@ last 4 of them, so a shorter datagram fails the CRC and a longer one is cut.
 
 from __future__ import annotations
 
+import math
 import struct
 import zlib
 from dataclasses import dataclass
@@ -44,6 +45,7 @@ HEADER = struct.Struct("<2sBB2I2IH")
 MOTOR_CMD = struct.Struct("<BffhHH12x")
 TAU_SCALE, KP_SCALE, KD_SCALE = 256.0, 32.0, 16.0
 CMD_MOTORS_AT = HEADER.size  # 22
+CMD_MOTORS = struct.Struct("<" + MOTOR_CMD.format[1:] * NUM_MOTOR_SLOTS)  #: all slots
 CMD_BMS_AT = CMD_MOTORS_AT + NUM_MOTOR_SLOTS * MOTOR_CMD.size  # 562: BmsCmd off, reserve[3]
 CMD_REMOTE_AT = CMD_BMS_AT + 4  # 566: wirelessRemote[40]
 CMD_CRC_AT = CMD_REMOTE_AT + 40 + 4  # 610, after a reserved uint32
@@ -58,6 +60,7 @@ IMU_AT = HEADER.size  # 22
 MOTOR_STATE = struct.Struct("<Bffhhffhb8x")
 TAU_EST_SCALE = 256.0
 STATE_MOTORS_AT = IMU_AT + IMU.size  # 75
+STATE_MOTORS = struct.Struct("<" + MOTOR_STATE.format[1:] * NUM_MOTOR_SLOTS)  #: all slots
 #: BmsState: version_h, version_l, bms_status, SOC (%), current (mA), cycle, BQ_NTC[2],
 #: MCU_NTC[2], cell_vol[10] (one byte each: mV / 32)
 BMS_STATE = struct.Struct("<BBBBiH2b2b10B")
@@ -71,6 +74,8 @@ STATE_CRC_AT = STATE_TAIL_AT + STATE_TAIL.size  # 803
 LOW_STATE_LENGTH = STATE_CRC_AT + 4  # 807
 
 CRC = struct.Struct("<I")
+_INT16_MIN, _INT16_MAX = -0x8000, 0x7FFF
+_UNUSED_MOTOR_STATE = (0, 0.0, 0.0, 0, 0, 0.0, 0.0, 0, 0)
 _BIT_REVERSED_BYTES = bytes(int(f"{b:08b}"[::-1], 2) for b in range(256))
 
 
@@ -125,8 +130,8 @@ def decode_low_cmd(data: bytes) -> LowCmdFrame:
     if len(data) != LOW_CMD_LENGTH:
         raise WireError(f"LowCmd datagram of {len(data)} bytes, expected {LOW_CMD_LENGTH}")
     head, level_flag, *_ = HEADER.unpack_from(data)
-    motors = np.array(list(MOTOR_CMD.iter_unpack(data[CMD_MOTORS_AT:CMD_BMS_AT])), dtype=np.float64)
-    mode, q, dq, tau, kp, kd = motors.T
+    motors = np.array(CMD_MOTORS.unpack_from(data, CMD_MOTORS_AT), dtype=np.float64)
+    mode, q, dq, tau, kp, kd = motors.reshape(NUM_MOTOR_SLOTS, -1).T
     (crc,) = CRC.unpack_from(data, CMD_CRC_AT)
     return LowCmdFrame(
         head=head,
@@ -166,30 +171,28 @@ def encode_low_state(
     buf = bytearray(LOW_STATE_LENGTH)
     HEADER.pack_into(buf, 0, HEAD, LOWLEVEL, 0, 0, 0, 0, 0, 0)
     quat = [float(v) for v in quat_wxyz]
-    IMU.pack_into(
-        buf,
-        IMU_AT,
-        *quat,
-        *map(float, gyro_rad_s),
-        *map(float, accel_m_s2),
-        *_rpy_from_quat(*quat),
-        0,
-    )
-    tau_int = np.clip(np.trunc(np.asarray(tau_est) * TAU_EST_SCALE), -32768, 32767)
-    for i, (qi, dqi, ti) in enumerate(zip(q, dq, tau_int, strict=True)):
-        at = STATE_MOTORS_AT + i * MOTOR_STATE.size
-        MOTOR_STATE.pack_into(buf, at, SERVO_MODE, float(qi), float(dqi), 0, int(ti), 0, 0, 0, 0)
+    imu = (*quat, *map(float, gyro_rad_s), *map(float, accel_m_s2), *_rpy_from_quat(*quat))
+    IMU.pack_into(buf, IMU_AT, *imu, 0)
+    tau_int = np.trunc(np.asarray(tau_est, dtype=np.float64) * TAU_EST_SCALE)
+    motors: list[float | int] = []
+    for qi, dqi, ti in zip(q, dq, tau_int.tolist(), strict=True):
+        motors += (SERVO_MODE, float(qi), float(dqi), 0, _int16(ti), 0.0, 0.0, 0, 0)
+    motors += _UNUSED_MOTOR_STATE * (NUM_MOTOR_SLOTS - len(tau_int))
+    STATE_MOTORS.pack_into(buf, STATE_MOTORS_AT, *motors)
     buf[BMS_SOC_AT] = battery_soc
-    force = np.clip(np.rint(np.asarray(foot_force, dtype=np.float64)), -32768, 32767)
-    STATE_TAIL.pack_into(
-        buf, STATE_TAIL_AT, *force.astype(int).tolist(), 0, 0, 0, 0, tick, wireless_remote
-    )
+    force = [_int16(round(float(f))) for f in foot_force]
+    STATE_TAIL.pack_into(buf, STATE_TAIL_AT, *force, 0, 0, 0, 0, tick, wireless_remote)
     return _with_crc(buf, STATE_CRC_AT)
+
+
+def _int16(value: float) -> int:
+    """``value`` saturated to int16."""
+    return int(min(max(value, _INT16_MIN), _INT16_MAX))
 
 
 def _rpy_from_quat(w: float, x: float, y: float, z: float) -> tuple[float, float, float]:
     """Roll, pitch, yaw (rad, Z-Y-X) of a unit quaternion."""
-    roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
-    pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))
-    yaw = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-    return float(roll), float(pitch), float(yaw)
+    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = math.asin(min(max(2 * (w * y - z * x), -1.0), 1.0))
+    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return roll, pitch, yaw
