@@ -22,7 +22,7 @@ from types import ModuleType
 import numpy as np
 
 from quaddance.deploy.remote import decode_remote
-from quaddance.deploy.robot import JointCommand, Reading, Robot
+from quaddance.deploy.robot import JointCommand, Reading, Robot, realtime_priority
 from quaddance.errors import QuaddanceError
 from quaddance.robots import GO1, RobotCfg
 
@@ -32,6 +32,9 @@ ROBOT_IP = "192.168.123.10"  #: the Go1's motor controller board on its wired ne
 ROBOT_PORT = 8007
 LOCAL_PORT = 8080
 LOOP_S = 0.002  #: 500 Hz, the SDK examples' low-level loop
+#: The exchange thread's real-time priority: above the runner's (a thread does not inherit
+#: it), so the robot hears from the PC every 2 ms whatever else the machine does.
+LOOP_RT_PRIORITY = 15
 
 
 def load_sdk() -> ModuleType:
@@ -133,6 +136,10 @@ class Go1Robot(Robot):
         )
 
     def _loop(self) -> None:
+        with realtime_priority(LOOP_RT_PRIORITY):
+            self._exchange()
+
+    def _exchange(self) -> None:
         # Until the runner's first command: idle motors (mode 0, no torque), as the SDK starts.
         next_t = time.monotonic()
         while self._running:
