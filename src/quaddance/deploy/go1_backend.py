@@ -51,15 +51,13 @@ def load_sdk() -> ModuleType:
 def fill_low_cmd(low_cmd, cmd: JointCommand, robot: RobotCfg) -> None:
     """Write a `JointCommand` (model order) into an SDK ``LowCmd``, servo mode."""
     low_cmd.levelFlag = LOWLEVEL
-    for j in range(robot.num_joints):
-        m = low_cmd.motorCmd[robot.sdk_joint_index[j]]
-        sign = robot.sdk_joint_sign[j]
+    motors = low_cmd.motorCmd  # the binding builds this list on every access: once
+    values = (cmd.q_rad, cmd.dq_rad_s, cmd.kp, cmd.kd, cmd.tau_ff_nm)
+    columns = (robot.sdk_joint_index, robot.sdk_joint_sign, *(v.tolist() for v in values))
+    for i, sign, q, dq, kp, kd, tau in zip(*columns, strict=True):
+        m = motors[i]
         m.mode = SERVO_MODE
-        m.q = float(sign * cmd.q_rad[j])
-        m.dq = float(sign * cmd.dq_rad_s[j])
-        m.Kp = float(cmd.kp[j])
-        m.Kd = float(cmd.kd[j])
-        m.tau = float(sign * cmd.tau_ff_nm[j])
+        m.q, m.dq, m.Kp, m.Kd, m.tau = sign * q, sign * dq, kp, kd, sign * tau
 
 
 def reading_from_low_state(state, robot: RobotCfg) -> Reading:
