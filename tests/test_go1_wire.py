@@ -207,13 +207,14 @@ def test_sdk_keeps_its_last_state_on_a_bad_crc_head_length_or_sender(sdk_udp, ro
 
 # --- the go1-sim link: the robot's side of the wire ------------------------------------------
 
-# Left and right legs swapped, hips mirrored: a map that is not the identity, so both sides
-# must use the same table (hips are symmetric, so the SDK's PositionLimit keeps the values).
+# Left and right legs swapped, hips mirrored, feet shuffled: maps that are not the identity,
+# so both sides must use the same tables (hips are symmetric, so the SDK's PositionLimit
+# keeps the values).
 MIRRORED = dataclasses.replace(
     GO1,
     sdk_joint_index=(3, 4, 5, 0, 1, 2, 9, 10, 11, 6, 7, 8),
     sdk_joint_sign=(-1.0, 1.0, 1.0) * 4,
-    sdk_foot_index=(0, 1, 2, 3),
+    sdk_foot_index=(2, 0, 3, 1),
 )
 
 
@@ -280,7 +281,7 @@ def test_link_refuses_bad_datagrams_and_idles_motors_out_of_servo_mode(link, sdk
 
 
 def test_go1_backend_drives_the_link_through_the_sdk(link):
-    """The unchanged `Go1Robot` (the SDK binding, its PositionLimit and PowerProtect) against
+    """The real robot's `Go1Robot` (the SDK binding, its PositionLimit and PowerProtect) against
     the link: commands and states cross the wire with the joint map both sides share."""
     robot = Go1Robot(robot_ip=LOCALHOST, robot_port=link.port, local_port=free_udp_port())
     robot.robot_cfg = MIRRORED

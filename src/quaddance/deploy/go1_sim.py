@@ -4,8 +4,8 @@ The process binds UDP on 127.0.0.1 at the robot's port and behaves as the Go1's 
 controller board does for unitree_legged_sdk 3.8: it takes ``LowCmd`` datagrams (`go1_wire`)
 and answers ``LowState`` datagrams to the address the last valid command came from, from the
 port the SDK targets (the SDK's socket is connected there and takes nothing from elsewhere).
-So the unchanged `Go1Robot` backend, its target set to 127.0.0.1 and this port, drives it
-through the real SDK binding. A datagram of the wrong length, head or level, or with a bad
+So the `Go1Robot` backend that drives a real Go1, its target set to 127.0.0.1 and this port,
+drives it through the real SDK binding. A datagram of the wrong length, head or level, or with a bad
 CRC, is counted in `Go1UdpLink.rejected` and never applied.
 
 Run as ``python -m quaddance.deploy.go1_sim --link '{"port": N}' ...`` (`run_sim_process`).
@@ -130,7 +130,7 @@ def free_udp_port() -> int:
 def go1_sim_robot(
     cfg: SimRobotCfg | None = None, power_level: int = 1
 ) -> simulator.ProtocolSimRobot:
-    """`deploy --robot go1-sim`: the `Go1Robot` backend, unchanged, through the SDK to a
+    """`deploy --robot go1-sim`: the real Go1's backend (`Go1Robot`) through the SDK to a
     simulated Go1 at 127.0.0.1 on a free port (the SDK's own side takes any free port)."""
     cfg = cfg or SimRobotCfg()
     port = free_udp_port()
