@@ -185,7 +185,7 @@ def test_state_encoded_here_decodes_in_the_sdk_to_every_field(sdk_udp, robot_soc
     assert state.bms.SOC == 77
 
 
-def test_sdk_keeps_its_last_state_on_a_bad_crc_head_length_or_sender(sdk_udp, robot_socket):
+def test_what_the_sdk_checks_on_receive(sdk_udp, robot_socket):
     udp, local_port = sdk_udp
     state = sdk.LowState()
     good = wire.encode_low_state(**_state_kwargs(tick=1))
@@ -203,6 +203,15 @@ def test_sdk_keeps_its_last_state_on_a_bad_crc_head_length_or_sender(sdk_udp, ro
         good_elsewhere = wire.encode_low_state(**_state_kwargs(tick=5))
         assert _sdk_receives(udp, local_port, elsewhere, good_elsewhere, state) == -1
     assert state.tick == 1
+    # What it does not check: levelFlag (with the CRC made right), the bytes past its 807.
+    other_level = bytearray(wire.encode_low_state(**_state_kwargs(tick=6)))
+    other_level[2] = 0x12
+    struct.pack_into("<I", other_level, wire.STATE_CRC_AT, wire.crc32(bytes(other_level)))
+    assert _sdk_receives(udp, local_port, robot_socket, bytes(other_level), state) == 0
+    assert state.tick == 6
+    long = wire.encode_low_state(**_state_kwargs(tick=7)) + bytes(8)
+    assert _sdk_receives(udp, local_port, robot_socket, long, state) == 0
+    assert state.tick == 7
 
 
 # --- the go1-sim link: the robot's side of the wire ------------------------------------------
