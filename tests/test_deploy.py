@@ -290,7 +290,8 @@ def test_sim_fault_ends_in_damp_within_its_deadline(policy, tmp_path, fault, dea
         assert summary["falls"] >= 1  # the shove topples the robot; damping caught it
 
 
-def test_ctrl_c_damps_writes_the_log_and_exits_0(policy, tmp_path):
+@pytest.mark.parametrize("backend", ["sim", "go1-sim"])
+def test_ctrl_c_damps_writes_the_log_and_exits_0(policy, tmp_path, backend):
     dance_path = tmp_path / "dance.npz"
     save_dance(dance_path, as_dance(dance_targets(policy, 20.0)))
     out = tmp_path / "out"
@@ -302,7 +303,7 @@ def test_ctrl_c_damps_writes_the_log_and_exits_0(policy, tmp_path):
         "--dance",
         str(dance_path),
         "--robot",
-        "sim",
+        backend,
         "--auto-start",
         "--out",
         str(out),
