@@ -1,0 +1,98 @@
+"""DDS for the Go2 (unitree_sdk2 over Cyclone DDS), set up in one place.
+
+Optional: ``pip install 'quaddance[go2]'`` installs the SDK (PyPI ``unitree-sdk2py-dimos``, a
+fork of Unitree's unitree_sdk2_python that runs on cyclonedds 11; module ``unitree_sdk2py``);
+it is imported only when a Go2 backend or simulator runs.
+
+The SDK's channels (topics, its RPC clients and servers) all live in one Cyclone DDS domain
+per process, made once by ``ChannelFactoryInitialize(domain, iface)``. That call builds its
+Cyclone configuration from a template naming the interface; `init_dds` puts quaddance's
+configuration in the template first, so that the SDK's own initialisation runs with it:
+
+- a robot's wired interface (``--network eth0``): that interface only, Cyclone's defaults
+  otherwise (multicast discovery, as the robot does);
+- loopback (tests, the simulators): multicast off and 127.0.0.1 the only peer, so that no
+  packet leaves 127.0.0.0/8 and nothing on the machine's other networks can join.
+"""
+
+from __future__ import annotations
+
+from quaddance.errors import QuaddanceError
+
+#: The domain a Go2 speaks on (unitree_sdk2's default).
+GO2_DOMAIN_ID = 0
+
+_CONFIG = """<?xml version="1.0" encoding="UTF-8" ?>
+<CycloneDDS xmlns="https://cdds.io/config">
+  <Domain Id="any">
+    <General>
+      <Interfaces><NetworkInterface name="{iface}"{multicast}/></Interfaces>{general}
+    </General>{discovery}
+  </Domain>
+</CycloneDDS>"""
+_LOOPBACK_GENERAL = "\n      <AllowMulticast>false</AllowMulticast>"
+_LOOPBACK_DISCOVERY = """
+    <Discovery>
+      <ParticipantIndex>auto</ParticipantIndex>
+      <Peers><Peer Address="127.0.0.1"/></Peers>
+    </Discovery>"""
+
+_initialized: tuple[str, int] | None = None  #: this process's (interface, domain)
+
+
+def require_sdk() -> None:
+    """Import the SDK (and with it cyclonedds), or raise one clear error saying how to get it."""
+    try:
+        import unitree_sdk2py  # noqa: F401
+    except ImportError as err:
+        raise QuaddanceError(
+            f"the Go2 needs unitree_sdk2py and cyclonedds ({err}): pip install 'quaddance[go2]'"
+        ) from None
+
+
+def is_loopback(iface: str) -> bool:
+    """Whether ``iface`` names the loopback interface (``lo`` on Linux, ``lo0`` on macOS)."""
+    return iface.startswith("lo")
+
+
+def cyclonedds_config(iface: str) -> str:
+    """The Cyclone DDS XML for the network interface ``iface`` (see the module's doc)."""
+    if not iface or any(c in iface for c in "<>\"'& "):
+        raise QuaddanceError(f"--network: {iface!r} is not a network interface name")
+    if is_loopback(iface):
+        return _CONFIG.format(
+            iface=iface,
+            multicast=' multicast="false"',
+            general=_LOOPBACK_GENERAL,
+            discovery=_LOOPBACK_DISCOVERY,
+        )
+    return _CONFIG.format(iface=iface, multicast="", general="", discovery="")
+
+
+def init_dds(iface: str, domain_id: int = GO2_DOMAIN_ID) -> None:
+    """Set up this process's DDS domain on ``iface``: once; again with the same settings is a
+    no-op, with others a `QuaddanceError` (the SDK holds one domain per process)."""
+    global _initialized
+    if _initialized == (iface, domain_id):
+        return
+    if _initialized is not None:
+        raise QuaddanceError(
+            f"DDS is already set up on {_initialized[0]} (domain {_initialized[1]}) in this "
+            f"process; cannot switch to {iface} (domain {domain_id})"
+        )
+    if not 0 <= domain_id <= 232:  # DDS's limit for its port mapping
+        raise QuaddanceError(f"DDS domain id must be 0-232, got {domain_id}")
+    config = cyclonedds_config(iface)
+    require_sdk()
+    from unitree_sdk2py.core import channel
+
+    # The SDK formats this template with the interface's name; ours has no placeholder.
+    channel.ChannelConfigHasInterface = config
+    try:
+        channel.ChannelFactoryInitialize(domain_id, iface)
+    except Exception as err:  # the SDK raises a bare Exception after printing Cyclone's reason
+        raise QuaddanceError(
+            f"cannot start DDS on network interface {iface} (domain {domain_id}): {err} "
+            "(is the interface up? `ip link`)"
+        ) from None
+    _initialized = (iface, domain_id)
