@@ -1,0 +1,211 @@
+"""A Go2 over unitree_sdk2 (DDS): `quaddance deploy --robot go2`, and `go2-sim` unchanged.
+
+Optional: ``pip install 'quaddance[go2]'`` (see `quaddance.deploy.dds`, which sets DDS up).
+
+Low-level control needs the robot's own locomotion off: `start` asks the SDK's motion
+switcher which mode runs (``CheckMode``) and releases it (``ReleaseMode``) until none does.
+It then reads ``rt/lowstate``. From the runner's first command on, a 500 Hz thread publishes
+``rt/lowcmd`` (the SDK's header, level flag and servo mode, its CRC) with the latest command;
+the 50 Hz runner only swaps that command. Before the first command nothing is published,
+so a dry run sends nothing. Our safety layer (`quaddance.deploy.safety`) runs before that.
+
+The map from the SDK's motor and foot order to quaddance's (model joint order, task foot
+order) and the joint signs are the robot's (`RobotCfg.sdk_joint_index`, `sdk_joint_sign`,
+`sdk_foot_index`, in `quaddance.robots.go2`).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any
+
+import numpy as np
+
+from quaddance.deploy.dds import GO2_DOMAIN_ID, init_dds
+from quaddance.deploy.remote import decode_remote
+from quaddance.deploy.robot import JointCommand, Reading, Robot
+from quaddance.errors import QuaddanceError
+from quaddance.robots import GO2, RobotCfg
+
+LOW_CMD_TOPIC = "rt/lowcmd"
+LOW_STATE_TOPIC = "rt/lowstate"
+HEAD = (0xFE, 0xEF)  #: a Go2 LowCmd's first two bytes
+LOWLEVEL = 0xFF  #: level_flag: low-level control
+SERVO_MODE = 0x01  #: motor mode: PD servo (0x00 is idle)
+NUM_SDK_MOTORS = 20  #: LowCmd_ / LowState_ carry 20 motors; a Go2 uses the first 12
+LOOP_S = 0.002  #: 500 Hz, the SDK examples' low-level loop
+RPC_TIMEOUT_S = 1.0  #: the motion switcher's answer to one call
+
+
+def fill_low_cmd(msg: Any, cmd: JointCommand, robot: RobotCfg) -> None:
+    """Write a `JointCommand` (model order) into an SDK ``LowCmd_``, servo mode, with its CRC."""
+    from unitree_sdk2py.utils.crc import CRC
+
+    msg.head[:] = HEAD
+    msg.level_flag = LOWLEVEL
+    for j in range(robot.num_joints):
+        m = msg.motor_cmd[robot.sdk_joint_index[j]]
+        sign = robot.sdk_joint_sign[j]
+        m.mode = SERVO_MODE
+        m.q = float(sign * cmd.q_rad[j])
+        m.dq = float(sign * cmd.dq_rad_s[j])
+        m.kp = float(cmd.kp[j])
+        m.kd = float(cmd.kd[j])
+        m.tau = float(sign * cmd.tau_ff_nm[j])
+    msg.crc = CRC().Crc(msg)
+
+
+def reading_from_low_state(state: Any, robot: RobotCfg) -> Reading:
+    """An SDK ``LowState_`` as a `Reading` (model joint order, task foot order).
+
+    ``seq`` is the state's ``tick`` (the robot's milliseconds), new with every state.
+    """
+    ms = state.motor_state
+    motors = list(zip(robot.sdk_joint_index, robot.sdk_joint_sign, strict=True))
+    force = np.asarray(state.foot_force, dtype=np.float64)
+    return Reading(
+        seq=int(state.tick),
+        stamp_s=int(state.tick) / 1000.0,
+        quat_wxyz=np.asarray(state.imu_state.quaternion, dtype=np.float64),  # w, x, y, z
+        gyro_rad_s=np.asarray(state.imu_state.gyroscope, dtype=np.float64),
+        joint_pos_rad=np.array([sign * ms[i].q for i, sign in motors]),
+        joint_vel_rad_s=np.array([sign * ms[i].dq for i, sign in motors]),
+        foot_force_n=force[list(robot.sdk_foot_index)],  # the sensors' raw units
+        battery_pct=float(state.bms_state.soc),
+        remote_keys=decode_remote(state.wireless_remote),
+    )
+
+
+class Go2Robot(Robot):
+    """`Robot` over unitree_sdk2's DDS topics, with sport mode released first."""
+
+    name = "go2"
+    robot_cfg = GO2  #: the robot this SDK drives (its joint map and signs)
+
+    def __init__(
+        self, network: str, domain_id: int = GO2_DOMAIN_ID, release_timeout_s: float = 10.0
+    ) -> None:
+        self.network = network
+        self.domain_id = domain_id
+        self.release_timeout_s = release_timeout_s
+        self._lock = threading.Lock()
+        self._reader: Any = None  # rt/lowstate
+        self._state_type: type = object
+        self._latest: Reading | None = None
+        self._cmd: JointCommand | None = None
+        self._running = False
+        self._thread: threading.Thread | None = None
+        self._pub: Any = None
+        self.released_modes: list[str] = []  #: the modes `start` released, for deploy.json
+
+    def start(self, timeout_s: float = 5.0) -> Reading:
+        init_dds(self.network, self.domain_id)
+        from cyclonedds.domain import DomainParticipant
+        from cyclonedds.qos import Policy, Qos
+        from cyclonedds.sub import DataReader
+        from cyclonedds.topic import Topic
+        from unitree_sdk2py.core.channel import ChannelPublisher
+        from unitree_sdk2py.idl.unitree_go.msg.dds_ import LowCmd_, LowState_
+
+        self._release_sport_mode()
+        # A reader of our own, not the SDK's: it keeps only the newest state, and `read`
+        # takes it when asked, so the 500 Hz states are decoded at the runner's 50 Hz only.
+        participant = DomainParticipant(self.domain_id)
+        topic = Topic(participant, LOW_STATE_TOPIC, LowState_)
+        self._reader = DataReader(participant, topic, Qos(Policy.History.KeepLast(1)))
+        self._state_type = LowState_
+        self._pub = ChannelPublisher(LOW_CMD_TOPIC, LowCmd_)
+        self._pub.Init()  # a writer, matched now; it writes from the first command on
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            reading = self.read()
+            if reading is not None:
+                return reading
+            time.sleep(0.01)
+        self.close()
+        raise QuaddanceError(
+            f"no {LOW_STATE_TOPIC} from the Go2 on {self.network} (DDS domain "
+            f"{self.domain_id}) within {timeout_s:g} s (network set-up: docs/DEPLOY.md)"
+        )
+
+    def _release_sport_mode(self) -> None:
+        """Release the robot's locomotion service until the motion switcher reports none."""
+        from unitree_sdk2py.comm.motion_switcher.motion_switcher_client import (
+            MotionSwitcherClient,
+        )
+
+        client = MotionSwitcherClient()
+        client.SetTimeout(RPC_TIMEOUT_S)
+        client.Init()
+        end = time.monotonic() + self.release_timeout_s
+        while True:
+            code, mode = client.CheckMode()
+            if code == 0 and not mode.get("name"):
+                return
+            if time.monotonic() > end:
+                problem = (
+                    f"it still runs {mode.get('name')!r}"
+                    if code == 0
+                    else f"no answer (SDK code {code})"
+                )
+                raise QuaddanceError(
+                    f"cannot release the Go2's sport mode on {self.network} (DDS domain "
+                    f"{self.domain_id}) within {self.release_timeout_s:g} s: {problem} "
+                    "(is the robot on, in an edition that allows low-level control? "
+                    "docs/DEPLOY.md)"
+                )
+            if code == 0:
+                self.released_modes.append(str(mode["name"]))
+                client.ReleaseMode()
+            time.sleep(0.1)
+
+    def read(self) -> Reading | None:
+        if self._reader is not None:
+            for state in self._reader.take(N=1):
+                if isinstance(state, self._state_type):  # not a disposal notice
+                    self._latest = reading_from_low_state(state, self.robot_cfg)
+        return self._latest
+
+    def send(self, cmd: JointCommand) -> None:
+        with self._lock:
+            self._cmd = cmd
+        if self._thread is None:
+            self._running = True
+            self._thread = threading.Thread(target=self._loop, name="go2-lowcmd", daemon=True)
+            self._thread.start()
+
+    def _loop(self) -> None:
+        from unitree_sdk2py.idl.default import unitree_go_msg_dds__LowCmd_
+
+        msg = unitree_go_msg_dds__LowCmd_()
+        packed: JointCommand | None = None
+        next_t = time.monotonic()
+        while self._running:
+            with self._lock:
+                cmd = self._cmd
+            if cmd is not packed:  # the CRC costs ~0.2 ms: once per runner command
+                fill_low_cmd(msg, cmd, self.robot_cfg)
+                packed = cmd
+            self._pub.Write(msg)
+            next_t += LOOP_S
+            pause = next_t - time.monotonic()
+            if pause > 0:
+                time.sleep(pause)
+            else:
+                next_t = time.monotonic()
+
+    def close(self) -> None:
+        # The last command the runner sent (damping) keeps going out until here.
+        self._running = False
+        if self._thread is not None:
+            self._thread.join(timeout=1.0)
+            self._thread = None
+        self._reader = None
+
+    def info(self) -> dict:
+        return {
+            "network": self.network,
+            "dds_domain": self.domain_id,
+            "released_modes": self.released_modes,
+        }
