@@ -1,0 +1,168 @@
+"""The simulated Go2 behind the Go2's own DDS topics: `quaddance deploy --robot go2-sim`.
+
+A process that the `go2` backend cannot tell from the robot (`python -m
+quaddance.deploy.go2_sim`, started by the harness): the physics core of
+`quaddance.deploy.simulator` behind unitree_sdk2's channels, with the SDK's own IDL types and
+CRC. It subscribes ``rt/lowcmd`` (a command whose CRC fails is counted and dropped), publishes
+``rt/lowstate`` and answers the motion switcher's ``CheckMode`` / ``ReleaseMode`` as a Go2
+does: its sport mode runs until released.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+from collections import deque
+from typing import Any
+
+import numpy as np
+
+from quaddance.deploy.dds import GO2_DOMAIN_ID, init_dds
+from quaddance.deploy.go2_backend import LOW_CMD_TOPIC, LOW_STATE_TOPIC, SERVO_MODE
+from quaddance.deploy.remote import encode_remote
+from quaddance.deploy.robot import JointCommand
+from quaddance.deploy.simulator import SensorState, SimLink, SimRobotCfg, run_sim_process
+from quaddance.robots import GO2, RobotCfg, get_robot
+
+SPORT_MODE = "normal"  #: the mode a Go2 runs when it boots (the SDK's name for sport mode)
+_INT16_MAX = 32767
+
+
+def joint_command_from_low_cmd(msg: Any, robot: RobotCfg) -> JointCommand:
+    """An SDK ``LowCmd_`` as a `JointCommand` in model order; a motor not in servo mode is
+    idle (no gain, no torque), as the motor boards treat it."""
+    mc = msg.motor_cmd
+    idx = robot.sdk_joint_index
+    sign = np.asarray(robot.sdk_joint_sign)
+    servo = np.array([mc[i].mode == SERVO_MODE for i in idx])
+
+    def field(name: str) -> np.ndarray:
+        return np.array([getattr(mc[i], name) for i in idx], dtype=np.float64)
+
+    return JointCommand(
+        q_rad=sign * field("q"),
+        dq_rad_s=sign * field("dq"),
+        kp=np.where(servo, field("kp"), 0.0),
+        kd=np.where(servo, field("kd"), 0.0),
+        tau_ff_nm=np.where(servo, sign * field("tau"), 0.0),
+    )
+
+
+def rpy_from_quat(quat_wxyz: np.ndarray) -> tuple[float, float, float]:
+    """Roll, pitch, yaw (rad, z-y-x) of a unit quaternion, as the Go2's IMU reports them."""
+    w, x, y, z = (float(v) for v in quat_wxyz)
+    return (
+        float(np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))),
+        float(np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))),
+        float(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))),
+    )
+
+
+def fill_low_state(msg: Any, state: SensorState, robot: RobotCfg) -> None:
+    """Write a `SensorState` (model order) into an SDK ``LowState_``, with its CRC."""
+    from unitree_sdk2py.utils.crc import CRC
+
+    msg.tick = state.tick & 0xFFFFFFFF
+    imu = msg.imu_state
+    imu.quaternion[:] = [float(v) for v in state.quat_wxyz]
+    imu.gyroscope[:] = [float(v) for v in state.gyro_rad_s]
+    imu.accelerometer[:] = [float(v) for v in state.accel_m_s2]
+    imu.rpy[:] = rpy_from_quat(state.quat_wxyz)
+    for j in range(robot.num_joints):
+        m = msg.motor_state[robot.sdk_joint_index[j]]
+        sign = robot.sdk_joint_sign[j]
+        m.q = float(sign * state.joint_pos_rad[j])
+        m.dq = float(sign * state.joint_vel_rad_s[j])
+        m.tau_est = float(sign * state.joint_tau_nm[j])
+    force = np.clip(np.rint(state.foot_force_n), -_INT16_MAX, _INT16_MAX).astype(int)
+    for k, i in enumerate(robot.sdk_foot_index):
+        msg.foot_force[i] = int(force[k])
+    msg.wireless_remote[:] = list(encode_remote(state.remote_keys))
+    msg.bms_state.soc = int(np.clip(round(state.battery_pct), 0, 100))
+    msg.crc = CRC().Crc(msg)
+
+
+class Go2DdsLink(SimLink):
+    """The Go2's DDS side: ``rt/lowcmd`` in, ``rt/lowstate`` out, the motion switcher."""
+
+    def __init__(self, iface: str = "lo", domain: int = GO2_DOMAIN_ID, robot: RobotCfg = GO2):
+        init_dds(iface, domain)
+        from unitree_sdk2py.core.channel import ChannelPublisher, ChannelSubscriber
+        from unitree_sdk2py.idl.default import unitree_go_msg_dds__LowState_
+        from unitree_sdk2py.idl.unitree_go.msg.dds_ import LowCmd_, LowState_
+        from unitree_sdk2py.utils.crc import CRC
+
+        self.robot = robot
+        self.rejected = 0
+        self._crc = CRC()
+        self._arrived: deque[JointCommand] = deque()  # appended by DDS's thread
+        self._state_msg = unitree_go_msg_dds__LowState_()
+        self.switcher = MotionSwitcher()
+        self._pub = ChannelPublisher(LOW_STATE_TOPIC, LowState_)
+        self._pub.Init()
+        self._sub = ChannelSubscriber(LOW_CMD_TOPIC, LowCmd_)
+        self._sub.Init(self._on_cmd, 0)
+
+    def _on_cmd(self, msg: Any) -> None:
+        if self._crc.Crc(msg) != msg.crc:
+            self.rejected += 1
+            return
+        self._arrived.append(joint_command_from_low_cmd(msg, self.robot))
+
+    def poll(self) -> list[JointCommand | str]:
+        out: list[JointCommand | str] = []
+        while self._arrived:
+            out.append(self._arrived.popleft())
+        return out
+
+    def publish(self, state: SensorState) -> None:
+        fill_low_state(self._state_msg, state, self.robot)
+        self._pub.Write(self._state_msg)
+
+    def close(self) -> None:
+        self._sub.Close()
+
+
+class MotionSwitcher:
+    """The robot's motion switcher service (the SDK's RPC server): ``CheckMode`` names the
+    running mode, the sport mode until ``ReleaseMode``; ``releases`` counts those calls."""
+
+    def __init__(self) -> None:
+        from unitree_sdk2py.comm.motion_switcher import motion_switcher_api as api
+        from unitree_sdk2py.rpc.server import Server
+
+        self.mode = SPORT_MODE
+        self.releases = 0
+        self._lock = threading.Lock()
+        self._server = Server(api.MOTION_SWITCHER_SERVICE_NAME)
+        self._server._SetApiVersion(api.MOTION_SWITCHER_API_VERSION)
+        self._server._RegistHandler(api.MOTION_SWITCHER_API_ID_CHECK_MODE, self._check, False)
+        self._server._RegistHandler(api.MOTION_SWITCHER_API_ID_RELEASE_MODE, self._release, False)
+        self._server.Start(False)
+
+    def _check(self, parameter: str) -> tuple[int, str]:
+        with self._lock:
+            return 0, json.dumps({"form": "0", "name": self.mode})
+
+    def _release(self, parameter: str) -> tuple[int, str]:
+        with self._lock:
+            self.mode = ""
+            self.releases += 1
+        return 0, ""
+
+
+def make_link(cfg: SimRobotCfg, options: dict[str, Any]) -> Go2DdsLink:
+    """The link for `run_sim_process`: ``options`` ``{"iface": "lo", "domain": 0}``."""
+    return Go2DdsLink(
+        iface=str(options.get("iface", "lo")),
+        domain=int(options.get("domain", GO2_DOMAIN_ID)),
+        robot=get_robot(cfg.robot),
+    )
+
+
+def main(argv: list[str] | None = None) -> None:
+    run_sim_process(make_link, argv, "a simulated Go2 behind unitree_sdk2's DDS (internal)")
+
+
+if __name__ == "__main__":
+    main()
