@@ -8,8 +8,10 @@ ends live in helper processes (`HelperProcess`) and this process never starts DD
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import threading
 import time
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -20,7 +22,11 @@ pytest.importorskip("unitree_sdk2py", reason="needs the Go2 SDK: pip install 'qu
 from quaddance.children import HelperProcess
 from quaddance.deploy.dds import cyclonedds_config
 from quaddance.deploy.go2_backend import SERVO_MODE, fill_low_cmd, reading_from_low_state
-from quaddance.deploy.go2_sim import fill_low_state, joint_command_from_low_cmd
+from quaddance.deploy.go2_sim import (
+    fill_low_state,
+    joint_command_from_low_cmd,
+    serialize_low_state,
+)
 from quaddance.deploy.remote import DAMP_KEYS, KEY_A
 from quaddance.deploy.robot import JointCommand
 from quaddance.deploy.simulator import SensorState
@@ -103,6 +109,34 @@ def test_the_joint_map_round_trips(robot):
         assert low.motor_state[i].tau_est == pytest.approx(sign * state.joint_tau_nm[j], abs=1e-6)
     for k, i in enumerate(robot.sdk_foot_index):
         assert low.foot_force[i] == round(state.foot_force_n[k])
+
+
+def _fill_distinct(obj: Any, counter: Iterator[int]) -> None:
+    """Give every field of an IDL message its own non-zero value (ints 1-100, to fit any
+    integer type; floats exact in float32)."""
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if dataclasses.is_dataclass(value):
+            _fill_distinct(value, counter)
+        elif isinstance(value, list) and value and dataclasses.is_dataclass(value[0]):
+            for item in value:
+                _fill_distinct(item, counter)
+        elif isinstance(value, list):
+            setattr(obj, f.name, [_distinct(v, next(counter)) for v in value])
+        else:
+            setattr(obj, f.name, _distinct(value, next(counter)))
+
+
+def _distinct(like: float, n: int) -> float:
+    return n % 100 + 1 if isinstance(like, int) else n + 0.25
+
+
+def test_the_link_serializes_a_state_to_cyclonedds_own_bytes():
+    from unitree_sdk2py.idl.default import unitree_go_msg_dds__LowState_
+
+    msg = unitree_go_msg_dds__LowState_()
+    _fill_distinct(msg, itertools.count())
+    assert serialize_low_state(msg) == type(msg).serialize(msg)
 
 
 def test_dds_stays_on_loopback_and_names_the_robots_interface():
