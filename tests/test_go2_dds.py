@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -235,7 +236,7 @@ def _send_sdk_low_cmds(msgs: list) -> None:
 def _start_robot() -> tuple:
     from quaddance.deploy.go2_backend import Go2Robot
 
-    robot = _here["robot"] = Go2Robot("lo", DOMAIN)
+    robot = _here["robot"] = Go2Robot(DOMAIN, "lo")
     t0 = time.monotonic()
     reading = robot.start(timeout_s=10.0)
     return reading, time.monotonic() - t0, robot.info()
@@ -341,3 +342,69 @@ def test_the_backend_sends_nothing_before_the_first_command_then_500_hz(sides, s
     assert after == rejected  # the backend's CRC is the SDK's
     assert all(_same(c, cmd) for c in got)
     assert len(got) > 250  # 500 Hz, with room for a busy machine
+
+
+def _start_without_a_robot(domain: int) -> str:
+    from quaddance.deploy.go2_backend import Go2Robot
+
+    try:
+        Go2Robot(domain, "lo", release_timeout_s=0.5).start(timeout_s=1.0)
+    except QuaddanceError as err:
+        return str(err)
+    return "started"
+
+
+def test_no_motion_switcher_is_one_clear_error():
+    helper = HelperProcess()
+    try:
+        message = helper.call(_start_without_a_robot, domain=DOMAIN + 1)
+    finally:
+        helper.close()
+        helper._proc.join(timeout=10)
+    assert message.startswith("cannot release the Go2's sport mode on lo (DDS domain 87)")
+    assert "no answer" in message
+
+
+def test_a_missing_sdk_names_the_extra_to_install(monkeypatch):
+    from quaddance.deploy.dds import load_sdk2
+
+    monkeypatch.setitem(sys.modules, "unitree_sdk2py", None)  # as if not installed
+    with pytest.raises(QuaddanceError, match=r"pip install 'quaddance\[go2\]'"):
+        load_sdk2()
+
+
+def _run_go2_sim(seconds: float) -> dict:
+    """`--robot go2-sim` end to end: the simulator process, the unchanged backend."""
+    from quaddance.deploy.go2_sim import go2_sim_robot
+
+    robot = go2_sim_robot()
+    first = robot.start(timeout_s=30.0)
+    cmd = JointCommand.damping(first.joint_pos_rad, kd=1.0)
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        robot.send(cmd)
+        time.sleep(0.02)
+    last = robot.read()
+    t0 = time.monotonic()
+    robot.close()
+    return {
+        "first": first,
+        "new_states": last.seq - first.seq,
+        "close_s": time.monotonic() - t0,
+        "received": robot.received(),
+        "truth_rows": len(robot.truth()["seq"]),
+    }
+
+
+def test_the_go2_simulator_runs_behind_the_unchanged_backend():
+    helper = HelperProcess()
+    try:
+        run = helper.call(_run_go2_sim, seconds=1.0)
+    finally:
+        helper.close()
+        helper._proc.join(timeout=10)
+    assert run["first"].battery_pct == 90.0 and run["first"].remote_keys == 0
+    assert run["new_states"] > 100  # 500 Hz states, with room for a busy machine
+    got = run["received"]
+    assert got["rejected"] == 0 and got["commands"] == got["torque_commands"] > 250
+    assert run["truth_rows"] > 0 and run["close_s"] < 5.0

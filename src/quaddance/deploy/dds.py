@@ -40,7 +40,7 @@ _LOOPBACK_DISCOVERY = """
 _initialized: tuple[str, int] | None = None  #: this process's (interface, domain)
 
 
-def require_sdk() -> None:
+def load_sdk2() -> None:
     """Import the SDK (and with it cyclonedds), or raise one clear error saying how to get it."""
     try:
         import unitree_sdk2py  # noqa: F401
@@ -83,7 +83,7 @@ def init_dds(iface: str, domain_id: int = GO2_DOMAIN_ID) -> None:
     if not 0 <= domain_id <= 232:  # DDS's limit for its port mapping
         raise QuaddanceError(f"DDS domain id must be 0-232, got {domain_id}")
     config = cyclonedds_config(iface)
-    require_sdk()
+    load_sdk2()
     from unitree_sdk2py.core import channel
 
     # The SDK formats this template with the interface's name; ours has no placeholder.

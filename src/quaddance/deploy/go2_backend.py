@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from quaddance.deploy.dds import GO2_DOMAIN_ID, init_dds
+from quaddance.deploy.dds import init_dds, load_sdk2
 from quaddance.deploy.remote import decode_remote
 from quaddance.deploy.robot import JointCommand, Reading, Robot
 from quaddance.errors import QuaddanceError
@@ -103,9 +103,8 @@ class Go2Robot(Robot):
     name = "go2"
     robot_cfg = GO2  #: the robot this SDK drives (its joint map and signs)
 
-    def __init__(
-        self, network: str, domain_id: int = GO2_DOMAIN_ID, release_timeout_s: float = 10.0
-    ) -> None:
+    def __init__(self, domain_id: int, network: str, release_timeout_s: float = 10.0) -> None:
+        load_sdk2()  # the missing-SDK error at once
         self.network = network
         self.domain_id = domain_id
         self.release_timeout_s = release_timeout_s

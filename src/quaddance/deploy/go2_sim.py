@@ -11,6 +11,7 @@ does: its sport mode runs until released.
 from __future__ import annotations
 
 import json
+import os
 import struct
 import threading
 from collections import deque
@@ -23,12 +24,19 @@ from quaddance.deploy.go2_backend import (
     LOW_CMD_TOPIC,
     LOW_STATE_TOPIC,
     SERVO_MODE,
+    Go2Robot,
     freeze_serialized,
     sdk_crc,
 )
 from quaddance.deploy.remote import encode_remote
 from quaddance.deploy.robot import JointCommand
-from quaddance.deploy.simulator import SensorState, SimLink, SimRobotCfg, run_sim_process
+from quaddance.deploy.simulator import (
+    ProtocolSimRobot,
+    SensorState,
+    SimLink,
+    SimRobotCfg,
+    run_sim_process,
+)
 from quaddance.robots import GO2, RobotCfg, get_robot
 
 SPORT_MODE = "normal"  #: the mode a Go2 runs when it boots (the SDK's name for sport mode)
@@ -206,6 +214,25 @@ def make_link(cfg: SimRobotCfg, options: dict[str, Any]) -> Go2DdsLink:
         iface=str(options.get("iface", "lo")),
         domain=int(options.get("domain", GO2_DOMAIN_ID)),
         robot=get_robot(cfg.robot),
+    )
+
+
+def sim_domain_id() -> int:
+    """The DDS domain of this process's simulated Go2s, 100-199 (not the robot's 0): one per
+    controller process, which holds one domain, so that runs on one machine do not mix."""
+    return 100 + os.getpid() % 100
+
+
+def go2_sim_robot(cfg: SimRobotCfg | None = None) -> ProtocolSimRobot:
+    """`deploy --robot go2-sim`: a simulated Go2 driven by the unchanged `go2` backend, over
+    DDS on the loopback interface."""
+    domain = sim_domain_id()
+    return ProtocolSimRobot(
+        "go2-sim",
+        Go2Robot(domain, "lo"),
+        "quaddance.deploy.go2_sim",
+        cfg or SimRobotCfg(robot=GO2.name),
+        {"iface": "lo", "domain": domain},
     )
 
 
