@@ -91,6 +91,10 @@ def test_the_joint_map_round_trips(robot):
         unitree_go_msg_dds__LowState_,
     )
 
+    values = np.arange(1.0, 13.0)
+    np.testing.assert_array_equal(robot.from_sdk(robot.to_sdk(values)), values)
+    np.testing.assert_array_equal(robot.feet_from_sdk(robot.feet_to_sdk(values[:4])), values[:4])
+
     msg = unitree_go_msg_dds__LowCmd_()
     fill_low_cmd(msg, _command(), robot)
     assert all(msg.motor_cmd[i].mode == SERVO_MODE for i in range(12))
@@ -316,6 +320,7 @@ def test_the_backend_releases_sport_mode_through_the_motion_switcher(started):
     assert started["before"] == ("normal", 0)
     assert started["after"] == ("", 1)
     assert started["info"]["released_modes"] == ["normal"]
+    assert started["info"]["lowcmd_sent"] == 0
     assert started["start_s"] < 5.0
 
 

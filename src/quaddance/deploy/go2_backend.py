@@ -51,15 +51,12 @@ def fill_low_cmd(msg: Any, cmd: JointCommand, robot: RobotCfg) -> None:
     """Write a `JointCommand` (model order) into an SDK ``LowCmd_``, servo mode, with its CRC."""
     msg.head[:] = HEAD
     msg.level_flag = LOWLEVEL
-    for j in range(robot.num_joints):
-        m = msg.motor_cmd[robot.sdk_joint_index[j]]
-        sign = robot.sdk_joint_sign[j]
+    q, dq, tau = (robot.to_sdk(v) for v in (cmd.q_rad, cmd.dq_rad_s, cmd.tau_ff_nm))
+    kp, kd = (robot.to_sdk(v, signed=False) for v in (cmd.kp, cmd.kd))
+    for i, m in enumerate(msg.motor_cmd[: robot.num_joints]):
         m.mode = SERVO_MODE
-        m.q = float(sign * cmd.q_rad[j])
-        m.dq = float(sign * cmd.dq_rad_s[j])
-        m.kp = float(cmd.kp[j])
-        m.kd = float(cmd.kd[j])
-        m.tau = float(sign * cmd.tau_ff_nm[j])
+        m.q, m.dq, m.tau = float(q[i]), float(dq[i]), float(tau[i])
+        m.kp, m.kd = float(kp[i]), float(kd[i])
     msg.crc = sdk_crc().Crc(msg)
 
 
@@ -81,17 +78,15 @@ def reading_from_low_state(state: Any, robot: RobotCfg) -> Reading:
 
     ``seq`` is the state's ``tick`` (the robot's milliseconds), new with every state.
     """
-    ms = state.motor_state
-    motors = list(zip(robot.sdk_joint_index, robot.sdk_joint_sign, strict=True))
-    force = np.asarray(state.foot_force, dtype=np.float64)
+    motors = state.motor_state[: robot.num_joints]
     return Reading(
         seq=int(state.tick),
         stamp_s=int(state.tick) / 1000.0,
         quat_wxyz=np.asarray(state.imu_state.quaternion, dtype=np.float64),  # w, x, y, z
         gyro_rad_s=np.asarray(state.imu_state.gyroscope, dtype=np.float64),
-        joint_pos_rad=np.array([sign * ms[i].q for i, sign in motors]),
-        joint_vel_rad_s=np.array([sign * ms[i].dq for i, sign in motors]),
-        foot_force_n=force[list(robot.sdk_foot_index)],  # the sensors' raw units
+        joint_pos_rad=robot.from_sdk([m.q for m in motors]),
+        joint_vel_rad_s=robot.from_sdk([m.dq for m in motors]),
+        foot_force_n=robot.feet_from_sdk(state.foot_force),  # the sensors' raw units
         battery_pct=float(state.bms_state.soc),
         remote_keys=decode_remote(state.wireless_remote),
     )
@@ -113,10 +108,11 @@ class Go2Robot(Robot):
         self._state_type: type = object
         self._latest: Reading | None = None
         self._cmd: JointCommand | None = None
-        self._running = False
+        self._stop = threading.Event()  # ends the 500 Hz thread, and wakes it at once
         self._thread: threading.Thread | None = None
         self._pub: Any = None
         self.released_modes: list[str] = []  #: the modes `start` released, for deploy.json
+        self.sent = 0  #: rt/lowcmd messages written
 
     def start(self, timeout_s: float = 5.0) -> Reading:
         init_dds(self.network, self.domain_id)
@@ -137,11 +133,10 @@ class Go2Robot(Robot):
         self._pub = ChannelPublisher(LOW_CMD_TOPIC, LowCmd_)
         self._pub.Init()  # a writer, matched now; it writes from the first command on
         end = time.monotonic() + timeout_s
-        while time.monotonic() < end:
-            reading = self.read()
-            if reading is not None:
-                return reading
+        while (reading := self.read()) is None and time.monotonic() < end:
             time.sleep(0.01)
+        if reading is not None:
+            return reading
         self.close()
         raise QuaddanceError(
             f"no {LOW_STATE_TOPIC} from the Go2 on {self.network} (DDS domain "
@@ -190,7 +185,7 @@ class Go2Robot(Robot):
         with self._lock:
             self._cmd = cmd
         if self._thread is None:
-            self._running = True
+            self._stop.clear()
             self._thread = threading.Thread(target=self._loop, name="go2-lowcmd", daemon=True)
             self._thread.start()
 
@@ -200,7 +195,7 @@ class Go2Robot(Robot):
         msg = unitree_go_msg_dds__LowCmd_()
         packed: JointCommand | None = None
         next_t = time.monotonic()
-        while self._running:
+        while True:
             with self._lock:
                 cmd = self._cmd
             if cmd is not packed:  # once per runner command, not 10 times
@@ -208,24 +203,22 @@ class Go2Robot(Robot):
                 freeze_serialized(msg)
                 packed = cmd
             self._pub.Write(msg)
-            next_t += LOOP_S
-            pause = next_t - time.monotonic()
-            if pause > 0:
-                time.sleep(pause)
-            else:
-                next_t = time.monotonic()
+            self.sent += 1
+            next_t = max(next_t + LOOP_S, time.monotonic())  # late: no burst to catch up
+            if self._stop.wait(next_t - time.monotonic()):
+                return
 
     def close(self) -> None:
         # The last command the runner sent (damping) keeps going out until here.
-        self._running = False
+        self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=1.0)
-            self._thread = None
-        self._reader = None
+        self._thread = self._reader = None
 
     def info(self) -> dict:
         return {
             "network": self.network,
             "dds_domain": self.domain_id,
             "released_modes": self.released_modes,
+            "lowcmd_sent": self.sent,  # 0 after a dry run
         }

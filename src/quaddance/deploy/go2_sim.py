@@ -90,20 +90,18 @@ def serialize_low_state(msg: Any) -> bytes:
 def joint_command_from_low_cmd(msg: Any, robot: RobotCfg) -> JointCommand:
     """An SDK ``LowCmd_`` as a `JointCommand` in model order; a motor not in servo mode is
     idle (no gain, no torque), as the motor boards treat it."""
-    mc = msg.motor_cmd
-    idx = robot.sdk_joint_index
-    sign = np.asarray(robot.sdk_joint_sign)
-    servo = np.array([mc[i].mode == SERVO_MODE for i in idx])
+    motors = msg.motor_cmd[: robot.num_joints]
+    servo = robot.from_sdk([m.mode == SERVO_MODE for m in motors], signed=False) > 0
 
-    def field(name: str) -> np.ndarray:
-        return np.array([getattr(mc[i], name) for i in idx], dtype=np.float64)
+    def field(name: str, signed: bool = True) -> np.ndarray:
+        return robot.from_sdk([getattr(m, name) for m in motors], signed)
 
     return JointCommand(
-        q_rad=sign * field("q"),
-        dq_rad_s=sign * field("dq"),
-        kp=np.where(servo, field("kp"), 0.0),
-        kd=np.where(servo, field("kd"), 0.0),
-        tau_ff_nm=np.where(servo, sign * field("tau"), 0.0),
+        q_rad=field("q"),
+        dq_rad_s=field("dq"),
+        kp=np.where(servo, field("kp", signed=False), 0.0),
+        kd=np.where(servo, field("kd", signed=False), 0.0),
+        tau_ff_nm=np.where(servo, field("tau"), 0.0),
     )
 
 
@@ -125,15 +123,13 @@ def fill_low_state(msg: Any, state: SensorState, robot: RobotCfg) -> None:
     imu.gyroscope[:] = [float(v) for v in state.gyro_rad_s]
     imu.accelerometer[:] = [float(v) for v in state.accel_m_s2]
     imu.rpy[:] = rpy_from_quat(state.quat_wxyz)
-    for j in range(robot.num_joints):
-        m = msg.motor_state[robot.sdk_joint_index[j]]
-        sign = robot.sdk_joint_sign[j]
-        m.q = float(sign * state.joint_pos_rad[j])
-        m.dq = float(sign * state.joint_vel_rad_s[j])
-        m.tau_est = float(sign * state.joint_tau_nm[j])
-    force = np.clip(np.rint(state.foot_force_n), -_INT16_MAX, _INT16_MAX).astype(int)
-    for k, i in enumerate(robot.sdk_foot_index):
-        msg.foot_force[i] = int(force[k])
+    q, dq, tau = (
+        robot.to_sdk(v) for v in (state.joint_pos_rad, state.joint_vel_rad_s, state.joint_tau_nm)
+    )
+    for i, m in enumerate(msg.motor_state[: robot.num_joints]):
+        m.q, m.dq, m.tau_est = float(q[i]), float(dq[i]), float(tau[i])
+    force = np.clip(np.rint(state.foot_force_n), -_INT16_MAX, _INT16_MAX)
+    msg.foot_force[:] = [int(f) for f in robot.feet_to_sdk(force)]
     msg.wireless_remote[:] = list(encode_remote(state.remote_keys))
     msg.bms_state.soc = int(np.clip(round(state.battery_pct), 0, 100))
     msg.crc = sdk_crc().Crc(msg)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -156,6 +157,10 @@ class RobotCfg:
                 raise QuaddanceError(f"RobotCfg {self.name}: {field_name} needs {n} values")
         if n != 3 * len(self.legs) or sorted(self.feet) != sorted(self.legs):
             raise QuaddanceError(f"RobotCfg {self.name}: three joints per leg, one foot per leg")
+        if sorted(self.sdk_joint_index) != list(range(n)) or sorted(self.sdk_foot_index) != list(
+            range(len(self.feet))
+        ):
+            raise QuaddanceError(f"RobotCfg {self.name}: the SDK indices must be permutations")
 
     @property
     def short_name(self) -> str:
@@ -165,6 +170,33 @@ class RobotCfg:
     @property
     def num_joints(self) -> int:
         return len(self.joint_names)
+
+    def to_sdk(self, values: Sequence[float], signed: bool = True) -> np.ndarray:
+        """Model-order joint values in the SDK's motor order, turned into the SDK's angle
+        convention where ``signed`` (angles, velocities, torques; not gains)."""
+        out = np.empty(self.num_joints)
+        out[list(self.sdk_joint_index)] = np.asarray(values) * self._signs(signed)
+        return out
+
+    def from_sdk(self, values: Sequence[float], signed: bool = True) -> np.ndarray:
+        """The SDK's motor-order values (its first `num_joints` motors) in model order: the
+        inverse of `to_sdk`."""
+        return np.asarray(values, dtype=np.float64)[list(self.sdk_joint_index)] * self._signs(
+            signed
+        )
+
+    def feet_to_sdk(self, values: Sequence[float]) -> np.ndarray:
+        """Per-foot values in the task's order (`feet`) in the SDK's foot order."""
+        out = np.empty(len(self.feet))
+        out[list(self.sdk_foot_index)] = values
+        return out
+
+    def feet_from_sdk(self, values: Sequence[float]) -> np.ndarray:
+        """The SDK's per-foot values in the task's foot order: the inverse of `feet_to_sdk`."""
+        return np.asarray(values, dtype=np.float64)[list(self.sdk_foot_index)]
+
+    def _signs(self, signed: bool) -> np.ndarray:
+        return np.asarray(self.sdk_joint_sign) if signed else np.ones(self.num_joints)
 
     def leg_joint_cols(self, foot: str) -> tuple[int, int, int]:
         """Model-order indices of the hip, thigh and calf joints of ``foot``'s leg."""
