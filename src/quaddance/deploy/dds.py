@@ -17,6 +17,8 @@ configuration in the template first, so that the SDK's own initialisation runs w
 
 from __future__ import annotations
 
+from typing import Any
+
 from quaddance.errors import QuaddanceError
 
 #: The domain a Go2 speaks on (unitree_sdk2's default).
@@ -38,6 +40,7 @@ _LOOPBACK_DISCOVERY = """
     </Discovery>"""
 
 _initialized: tuple[str, int] | None = None  #: this process's (interface, domain)
+_participant: Any = None  #: this process's participant for `polled_reader`
 
 
 def load_sdk2() -> None:
@@ -96,3 +99,29 @@ def init_dds(iface: str, domain_id: int = GO2_DOMAIN_ID) -> None:
             "(is the interface up? `ip link`)"
         ) from None
     _initialized = (iface, domain_id)
+
+
+def polled_reader(topic: str, data_type: type, depth: int) -> Any:
+    """A cyclonedds ``DataReader`` of ``topic`` in this process's domain (`init_dds` first)
+    that keeps the newest ``depth`` samples until its owner takes them (``take(N)``, never
+    blocking), on the owner's thread.
+
+    Not the SDK's channels, whose readers call back from Cyclone's receive thread: Cyclone
+    starts its threads at normal priority, and Python running there holds the GIL; on a busy
+    machine the simulator's real-time loop waited for it up to 100 ms at a time.
+    """
+    global _participant
+    if _initialized is None:
+        raise RuntimeError("polled_reader before init_dds")
+    from cyclonedds.domain import DomainParticipant
+    from cyclonedds.qos import Policy, Qos
+    from cyclonedds.sub import DataReader
+    from cyclonedds.topic import Topic
+
+    if _participant is None:
+        _participant = DomainParticipant(_initialized[1])
+    return DataReader(
+        _participant,
+        Topic(_participant, topic, data_type),
+        Qos(Policy.History.KeepLast(depth)),
+    )

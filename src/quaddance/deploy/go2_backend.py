@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from quaddance.deploy.dds import init_dds, load_sdk2
+from quaddance.deploy.dds import init_dds, load_sdk2, polled_reader
 from quaddance.deploy.remote import decode_remote
 from quaddance.deploy.robot import JointCommand, Reading, Robot
 from quaddance.errors import QuaddanceError
@@ -116,19 +116,13 @@ class Go2Robot(Robot):
 
     def start(self, timeout_s: float = 5.0) -> Reading:
         init_dds(self.network, self.domain_id)
-        from cyclonedds.domain import DomainParticipant
-        from cyclonedds.qos import Policy, Qos
-        from cyclonedds.sub import DataReader
-        from cyclonedds.topic import Topic
         from unitree_sdk2py.core.channel import ChannelPublisher
         from unitree_sdk2py.idl.unitree_go.msg.dds_ import LowCmd_, LowState_
 
         self._release_sport_mode()
-        # A reader of our own, not the SDK's: it keeps only the newest state, and `read`
-        # takes it when asked, so the 500 Hz states are decoded at the runner's 50 Hz only.
-        participant = DomainParticipant(self.domain_id)
-        topic = Topic(participant, LOW_STATE_TOPIC, LowState_)
-        self._reader = DataReader(participant, topic, Qos(Policy.History.KeepLast(1)))
+        # Only the newest state, taken when `read` asks: the 500 Hz states are decoded at the
+        # runner's 50 Hz only.
+        self._reader = polled_reader(LOW_STATE_TOPIC, LowState_, depth=1)
         self._state_type = LowState_
         self._pub = ChannelPublisher(LOW_CMD_TOPIC, LowCmd_)
         self._pub.Init()  # a writer, matched now; it writes from the first command on

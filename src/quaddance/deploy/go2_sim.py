@@ -14,12 +14,11 @@ import json
 import os
 import struct
 import threading
-from collections import deque
 from typing import Any
 
 import numpy as np
 
-from quaddance.deploy.dds import GO2_DOMAIN_ID, init_dds
+from quaddance.deploy.dds import GO2_DOMAIN_ID, init_dds, polled_reader
 from quaddance.deploy.go2_backend import (
     LOW_CMD_TOPIC,
     LOW_STATE_TOPIC,
@@ -41,6 +40,8 @@ from quaddance.robots import GO2, RobotCfg, get_robot
 
 SPORT_MODE = "normal"  #: the mode a Go2 runs when it boots (the SDK's name for sport mode)
 _INT16_MAX = 32767
+#: Commands kept between two polls (1 ms apart): the newest 64, 128 ms at 500 Hz.
+COMMAND_QUEUE = 64
 
 
 def _xcdr1(*fields: str) -> struct.Struct:
@@ -140,30 +141,29 @@ class Go2DdsLink(SimLink):
 
     def __init__(self, iface: str = "lo", domain: int = GO2_DOMAIN_ID, robot: RobotCfg = GO2):
         init_dds(iface, domain)
-        from unitree_sdk2py.core.channel import ChannelPublisher, ChannelSubscriber
+        from unitree_sdk2py.core.channel import ChannelPublisher
         from unitree_sdk2py.idl.default import unitree_go_msg_dds__LowState_
         from unitree_sdk2py.idl.unitree_go.msg.dds_ import LowCmd_, LowState_
 
         self.robot = robot
         self.rejected = 0
-        self._arrived: deque[JointCommand] = deque()  # appended by DDS's thread
+        self._cmd_type = LowCmd_
         self._state_msg = unitree_go_msg_dds__LowState_()
         self.switcher = MotionSwitcher()
         self._pub = ChannelPublisher(LOW_STATE_TOPIC, LowState_)
         self._pub.Init()
-        self._sub = ChannelSubscriber(LOW_CMD_TOPIC, LowCmd_)
-        self._sub.Init(self._on_cmd, 0)
-
-    def _on_cmd(self, msg: Any) -> None:
-        if sdk_crc().Crc(msg) != msg.crc:
-            self.rejected += 1
-            return
-        self._arrived.append(joint_command_from_low_cmd(msg, self.robot))
+        # Decoded in `poll`, on the simulator's real-time thread.
+        self._reader = polled_reader(LOW_CMD_TOPIC, LowCmd_, depth=COMMAND_QUEUE)
 
     def poll(self) -> list[JointCommand | str]:
         out: list[JointCommand | str] = []
-        while self._arrived:
-            out.append(self._arrived.popleft())
+        for msg in self._reader.take(N=COMMAND_QUEUE):
+            if not isinstance(msg, self._cmd_type):  # a disposal notice, no data
+                continue
+            if sdk_crc().Crc(msg) != msg.crc:
+                self.rejected += 1
+            else:
+                out.append(joint_command_from_low_cmd(msg, self.robot))
         return out
 
     def publish(self, state: SensorState) -> None:
@@ -173,7 +173,7 @@ class Go2DdsLink(SimLink):
         self._pub.Write(msg)
 
     def close(self) -> None:
-        self._sub.Close()
+        self._reader = None
 
 
 class MotionSwitcher:
