@@ -34,7 +34,6 @@ LOW_STATE_TOPIC = "rt/lowstate"
 HEAD = (0xFE, 0xEF)  #: a Go2 LowCmd's first two bytes
 LOWLEVEL = 0xFF  #: level_flag: low-level control
 SERVO_MODE = 0x01  #: motor mode: PD servo (0x00 is idle)
-NUM_SDK_MOTORS = 20  #: LowCmd_ / LowState_ carry 20 motors; a Go2 uses the first 12
 LOOP_S = 0.002  #: 500 Hz, the SDK examples' low-level loop
 RPC_TIMEOUT_S = 1.0  #: the motion switcher's answer to one call
 
