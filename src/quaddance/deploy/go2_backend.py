@@ -25,7 +25,7 @@ import numpy as np
 
 from quaddance.deploy.dds import init_dds, load_sdk2, polled_reader
 from quaddance.deploy.remote import decode_remote
-from quaddance.deploy.robot import JointCommand, Reading, Robot
+from quaddance.deploy.robot import JointCommand, Reading, Robot, realtime_priority
 from quaddance.errors import QuaddanceError
 from quaddance.robots import GO2, RobotCfg
 
@@ -35,6 +35,9 @@ HEAD = (0xFE, 0xEF)  #: a Go2 LowCmd's first two bytes
 LOWLEVEL = 0xFF  #: level_flag: low-level control
 SERVO_MODE = 0x01  #: motor mode: PD servo (0x00 is idle)
 LOOP_S = 0.002  #: 500 Hz, the SDK examples' low-level loop
+#: The lowcmd thread's real-time priority: above the runner's, which a thread does not
+#: inherit (the runner's resets on fork), so that the robot hears from the PC every 2 ms.
+LOOP_RT_PRIORITY = 15
 RPC_TIMEOUT_S = 1.0  #: the motion switcher's answer to one call
 
 
@@ -183,6 +186,10 @@ class Go2Robot(Robot):
             self._thread.start()
 
     def _loop(self) -> None:
+        with realtime_priority(LOOP_RT_PRIORITY):
+            self._write_commands()
+
+    def _write_commands(self) -> None:
         from unitree_sdk2py.idl.default import unitree_go_msg_dds__LowCmd_
 
         msg = unitree_go_msg_dds__LowCmd_()
