@@ -33,6 +33,7 @@ from quaddance.pipeline import DanceSpec
 from quaddance.play.dance import spec_for_policy
 from quaddance.play.policy import OnnxPolicy, shipped_policy_path
 from quaddance.robots import GO1
+from quaddance.targets import TargetConfig
 
 DEPLOY_KEYS = {
     "robot",
@@ -81,7 +82,8 @@ def dance_targets(policy: OnnxPolicy, seconds: float, seed: int = 3) -> np.ndarr
     """(T, 4) feasible targets from a synthetic song (no audio analysis: fast)."""
     from quaddance.pipeline import target_bank
 
-    cfg = spec_for_policy(DanceSpec(), policy).targets  # feasible, in the policy's range
+    robot_spec = DanceSpec(targets=TargetConfig(robot=policy.task.scene.robot))
+    cfg = spec_for_policy(robot_spec, policy).targets  # feasible, in the policy's range
     return target_bank(1, seconds, seed=seed, cfg=cfg)[0].astype(np.float64)
 
 
@@ -290,10 +292,16 @@ def test_sim_fault_ends_in_damp_within_its_deadline(policy, tmp_path, fault, dea
         assert summary["falls"] >= 1  # the shove topples the robot; damping caught it
 
 
-@pytest.mark.parametrize("backend", ["sim", "go1-sim"])
-def test_ctrl_c_damps_writes_the_log_and_exits_0(policy, tmp_path, backend):
+@pytest.mark.parametrize("backend", ["sim", "go1-sim", "go2-sim"])
+def test_ctrl_c_damps_writes_the_log_and_exits_0(tmp_path, backend):
+    from quaddance.deploy.job import BACKENDS
+    from quaddance.robots import get_robot
+
+    robot = get_robot(BACKENDS[backend] or "go1")
+    dance = as_dance(dance_targets(OnnxPolicy.load(shipped_policy_path(robot)), 20.0))
+    dance.robot = robot.name
     dance_path = tmp_path / "dance.npz"
-    save_dance(dance_path, as_dance(dance_targets(policy, 20.0)))
+    save_dance(dance_path, dance)
     out = tmp_path / "out"
     cmd = [
         sys.executable,

@@ -23,6 +23,7 @@ from quaddance.pipeline import DanceSpec, target_bank
 from quaddance.play.dance import spec_for_policy
 from quaddance.play.policy import OnnxPolicy, shipped_policy_path
 from quaddance.robots import GO1, GO2, get_robot
+from quaddance.targets import TargetConfig
 
 
 @pytest.fixture(scope="module")
@@ -31,7 +32,8 @@ def go1_policy() -> OnnxPolicy:
 
 
 def targets_for(policy: OnnxPolicy, seconds: float, seed: int = 3) -> np.ndarray:
-    cfg = spec_for_policy(DanceSpec(), policy).targets
+    robot_spec = DanceSpec(targets=TargetConfig(robot=policy.task.scene.robot))
+    cfg = spec_for_policy(robot_spec, policy).targets
     return target_bank(1, seconds, seed=seed, cfg=cfg)[0].astype(np.float64)
 
 
@@ -114,7 +116,7 @@ def test_dry_run_checks_the_state_and_sends_nothing(tmp_path, monkeypatch):
 # --- real-time runs through the robots' own protocols and their vendors' SDKs ---------------
 
 #: The backends that reach a simulator through a vendor SDK and that robot's protocol.
-PROTOCOL_SIMS = ["go1-sim"]
+PROTOCOL_SIMS = ["go1-sim", "go2-sim"]
 
 
 @pytest.fixture(scope="module")

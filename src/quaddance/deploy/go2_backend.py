@@ -141,13 +141,7 @@ class Go2Robot(Robot):
 
     def _release_sport_mode(self) -> None:
         """Release the robot's locomotion service until the motion switcher reports none."""
-        from unitree_sdk2py.comm.motion_switcher.motion_switcher_client import (
-            MotionSwitcherClient,
-        )
-
-        client = MotionSwitcherClient()
-        client.SetTimeout(RPC_TIMEOUT_S)
-        client.Init()
+        client = _motion_switcher()
         end = time.monotonic() + self.release_timeout_s
         while True:
             code, mode = client.CheckMode()
@@ -213,7 +207,9 @@ class Go2Robot(Robot):
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=1.0)
-        self._thread = self._reader = None
+        if self._pub is not None and (self._thread is None or not self._thread.is_alive()):
+            self._pub.Close()  # a writer still in use by a late thread is left to it
+        self._thread = self._reader = self._pub = None
 
     def info(self) -> dict:
         return {
@@ -222,3 +218,18 @@ class Go2Robot(Robot):
             "released_modes": self.released_modes,
             "lowcmd_sent": self.sent,  # 0 after a dry run
         }
+
+
+@functools.cache
+def _motion_switcher() -> Any:
+    """The process's motion switcher client: the SDK's RPC client has no close, and a
+    dropped one's DDS listener may still be called (a second deploy in one process
+    crashed), so it lives as long as the process's DDS domain."""
+    from unitree_sdk2py.comm.motion_switcher.motion_switcher_client import (
+        MotionSwitcherClient,
+    )
+
+    client = MotionSwitcherClient()
+    client.SetTimeout(RPC_TIMEOUT_S)
+    client.Init()
+    return client
