@@ -168,3 +168,50 @@ def test_the_dry_run_sends_no_torque_through_the_sdk(backend, policies, tmp_path
     received = robot.received()
     # A Go1's SDK link answers only to commands: it exchanges idle (zero-gain) frames.
     assert received["torque_commands"] == 0 and received["rejected"] == 0, received
+
+
+@pytest.mark.parametrize("command", ["deploy", "live"])
+def test_the_backend_options_reach_the_job_and_the_go2_backend(monkeypatch, command):
+    from test_dance_options import _job
+
+    from quaddance.deploy.go2_backend import Go2Robot
+
+    flags = ["--robot", "go2", "--network", "eth7", "--dds-domain", "7"]
+    job = _job(monkeypatch, command, *flags, *(["--dry-run"] if command == "deploy" else []))
+    assert (job.backend.robot, job.backend.network, job.backend.dds_domain) == ("go2", "eth7", 7)
+    assert job.spec.robot == GO2  # the robot model follows the backend
+    assert command == "live" or job.dry_run
+    robot = make_robot(job.backend, GO2)  # made, not started: nothing on the network
+    assert isinstance(robot, Go2Robot) and (robot.network, robot.domain_id) == ("eth7", 7)
+
+
+def test_dry_run_checks_fail_on_what_a_bad_set_up_reads(monkeypatch):
+    from typer.testing import CliRunner
+
+    from quaddance.cli import app
+    from quaddance.deploy import job as job_module
+    from quaddance.deploy.dry_run import check_readings
+    from quaddance.deploy.robot import Reading
+
+    def reading(seq: int, q: np.ndarray, quat, battery: float) -> Reading:
+        z = np.zeros(3)
+        return Reading(seq, seq * 0.02, np.asarray(quat, float), z, q, np.zeros(12), np.zeros(4),
+                       battery_pct=battery)  # fmt: skip
+
+    good_q = np.asarray(GO1.nominal_joint_pos_rad)
+    swapped = good_q.copy()
+    swapped[2] = -swapped[2]  # a calf read with the wrong sign: out of its range
+    tilted = [np.cos(0.3), np.sin(0.3), 0.0, 0.0]  # rolled 0.6 rad: not upright
+    rs = [reading(k, swapped, tilted, 20.0) for k in range(40)]
+    checks = check_readings(rs, reads=100, robot=GO1)
+    assert {k for k, c in checks.items() if not c["ok"]} == {
+        "states", "joints_in_range", "imu_upright", "battery",
+    }  # fmt: skip
+    assert checks["joints_in_range"]["detail"] == "out of range: FR_calf_joint"
+    ok = check_readings([reading(k, good_q, [1, 0, 0, 0], 80.0) for k in range(50)], 50, GO1)
+    assert all(c["ok"] for c in ok.values()), ok
+
+    failed = {"dry_run": True, "ok": False, "checks": checks}
+    monkeypatch.setattr(job_module, "run_deploy", lambda job, status: (failed, {}))
+    result = CliRunner().invoke(app, ["deploy", "--dry-run"])
+    assert result.exit_code == 1 and "dry run FAILED" in result.output, result.output

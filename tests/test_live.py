@@ -195,11 +195,13 @@ def _live(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:
     )
 
 
-def test_live_from_file_dances_in_real_time(song, tmp_path):
+@pytest.mark.parametrize("backend", ["sim", "go2-sim"])
+def test_live_from_file_dances_in_real_time(song, tmp_path, backend):
+    """On quaddance's own simulated robot, and on a Go2 through unitree_sdk2 (DDS)."""
     from quaddance.play.rollout import ROLLOUT_KEYS
 
     t0 = time.monotonic()
-    proc = _live("--from-file", str(song), "--out", str(tmp_path))
+    proc = _live("--from-file", str(song), "--robot", backend, "--out", str(tmp_path))
     wall_s = time.monotonic() - t0
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert wall_s >= 9.0  # the song is fed at real-time pace, never faster
@@ -217,6 +219,8 @@ def test_live_from_file_dances_in_real_time(song, tmp_path):
         assert set(z.files) == set(ROLLOUT_KEYS)
         assert z["time_s"].size == pytest.approx(9.0 * HZ, abs=3)
         assert z["beats_s"].size == beats.size
+    deployed = json.loads((tmp_path / "deploy.json").read_text())
+    assert deployed["robot"] == backend and deployed["sim"]["rejected"] == 0
 
 
 def test_live_errors_are_one_line(tmp_path, song):
