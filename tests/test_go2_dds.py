@@ -8,11 +8,9 @@ ends live in helper processes (`HelperProcess`) and this process never starts DD
 from __future__ import annotations
 
 import dataclasses
-import itertools
 import sys
 import threading
 import time
-from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -23,11 +21,8 @@ pytest.importorskip("unitree_sdk2py", reason="needs the Go2 SDK: pip install 'qu
 from quaddance.children import HelperProcess
 from quaddance.deploy.dds import cyclonedds_config
 from quaddance.deploy.go2_backend import SERVO_MODE, fill_low_cmd, reading_from_low_state
-from quaddance.deploy.go2_sim import (
-    fill_low_state,
-    joint_command_from_low_cmd,
-    serialize_low_state,
-)
+from quaddance.deploy.go2_sim import fill_low_state, joint_command_from_low_cmd
+from quaddance.deploy.go2_wire import decode_low_cmd, seal_low_cmd, seal_low_state
 from quaddance.deploy.remote import DAMP_KEYS, KEY_A
 from quaddance.deploy.robot import JointCommand
 from quaddance.deploy.simulator import SensorState
@@ -96,10 +91,11 @@ def test_the_joint_map_round_trips(robot):
     np.testing.assert_array_equal(robot.feet_from_sdk(robot.feet_to_sdk(values[:4])), values[:4])
 
     msg = unitree_go_msg_dds__LowCmd_()
-    fill_low_cmd(msg, _command(), robot)
+    motors = decode_low_cmd(fill_low_cmd(msg, _command(), robot))
     assert all(msg.motor_cmd[i].mode == SERVO_MODE for i in range(12))
     assert all(msg.motor_cmd[i].mode == 0 for i in range(12, 20))  # the Go2 has 12 motors
-    _assert_command_equal(joint_command_from_low_cmd(msg, robot), _command())
+    assert motors is not None and motors.crc_ok
+    _assert_command_equal(joint_command_from_low_cmd(motors, robot), _command())
 
     state = _state()
     low = unitree_go_msg_dds__LowState_()
@@ -116,32 +112,61 @@ def test_the_joint_map_round_trips(robot):
         assert low.foot_force[i] == round(state.foot_force_n[k])
 
 
-def _fill_distinct(obj: Any, counter: Iterator[int]) -> None:
-    """Give every field of an IDL message its own non-zero value (ints 1-100, to fit any
-    integer type; floats exact in float32)."""
+def _fill_random(obj: Any, rng: np.random.Generator) -> None:
+    """Give every field of an IDL message a random value (ints 0-127, to fit any integer type
+    the SDK packs; floats exact in float32)."""
     for f in dataclasses.fields(obj):
         value = getattr(obj, f.name)
         if dataclasses.is_dataclass(value):
-            _fill_distinct(value, counter)
+            _fill_random(value, rng)
         elif isinstance(value, list) and value and dataclasses.is_dataclass(value[0]):
             for item in value:
-                _fill_distinct(item, counter)
+                _fill_random(item, rng)
         elif isinstance(value, list):
-            setattr(obj, f.name, [_distinct(v, next(counter)) for v in value])
+            setattr(obj, f.name, [_random_like(v, rng) for v in value])
         else:
-            setattr(obj, f.name, _distinct(value, next(counter)))
+            setattr(obj, f.name, _random_like(value, rng))
 
 
-def _distinct(like: float, n: int) -> float:
-    return n % 100 + 1 if isinstance(like, int) else n + 0.25
+def _random_like(like: float, rng: np.random.Generator) -> float:
+    if isinstance(like, int):
+        return int(rng.integers(0, 128))
+    return float(np.float32(rng.normal(0.0, 100.0)))
 
 
-def test_the_link_serializes_a_state_to_cyclonedds_own_bytes():
-    from unitree_sdk2py.idl.default import unitree_go_msg_dds__LowState_
+@pytest.mark.parametrize("seed", range(5))
+def test_messages_serialize_to_cyclonedds_bytes_with_the_sdks_crc(seed):
+    from unitree_sdk2py.idl.default import (
+        unitree_go_msg_dds__LowCmd_,
+        unitree_go_msg_dds__LowState_,
+    )
+    from unitree_sdk2py.utils.crc import CRC
 
-    msg = unitree_go_msg_dds__LowState_()
-    _fill_distinct(msg, itertools.count())
-    assert serialize_low_state(msg) == type(msg).serialize(msg)
+    rng = np.random.default_rng(seed)
+    for make, seal in (
+        (unitree_go_msg_dds__LowCmd_, seal_low_cmd),
+        (unitree_go_msg_dds__LowState_, seal_low_state),
+    ):
+        msg = make()
+        _fill_random(msg, rng)
+        wire = seal(msg)
+        assert msg.crc == CRC().Crc(msg)
+        assert wire == type(msg).serialize(msg)
+
+    cmd = unitree_go_msg_dds__LowCmd_()
+    _fill_random(cmd, rng)
+    wire = seal_low_cmd(cmd)
+    motors = decode_low_cmd(wire)
+    assert motors is not None and motors.crc_ok
+    for name in ("mode", "q", "dq", "tau", "kp", "kd"):
+        np.testing.assert_array_equal(
+            getattr(motors, name), [getattr(m, name) for m in cmd.motor_cmd]
+        )
+    corrupt = bytearray(wire)
+    corrupt[100] ^= 1
+    assert not decode_low_cmd(bytes(corrupt)).crc_ok
+    assert decode_low_cmd(wire[:-4]) is None  # too short
+    assert decode_low_cmd(b"\x00\x00" + wire[2:]) is None  # big-endian: not what a Go2 sends
 
 
 def test_dds_stays_on_loopback_and_names_the_robots_interface():

@@ -8,8 +8,8 @@ the SDK's Python binding on 127.0.0.1 (tests/test_go1_wire.py).
 
 Little-endian, packed. Both datagrams open with the same 22-byte header (head ``fe ef``,
 levelFlag ``ff`` for low level, frameReserve, SN[2], version[2], bandWidth) and close with a
-reserved uint32 and the CRC (`crc32`). Each carries 20 motor slots; the Go1 uses the first 12,
-in the SDK's motor order (FR, FL, RR, RL x hip, thigh, calf).
+reserved uint32 and the CRC (`quaddance.deploy.unitree_crc.crc32`). Each carries 20 motor
+slots; the Go1 uses the first 12, in the SDK's motor order (FR, FL, RR, RL x hip, thigh, calf).
 
 On receive the SDK's socket is connected to the robot's address, so it takes states from that
 address and port only; of the datagrams queued it keeps the newest. It drops one whose head
@@ -22,12 +22,12 @@ from __future__ import annotations
 
 import math
 import struct
-import zlib
 from dataclasses import dataclass
 
 import numpy as np
 
 from quaddance.deploy.go1_backend import LOWLEVEL, SERVO_MODE
+from quaddance.deploy.unitree_crc import crc32
 
 HEAD = b"\xfe\xef"
 NUM_MOTOR_SLOTS = 20  #: motor records per datagram (the Go1 drives 12)
@@ -76,27 +76,10 @@ LOW_STATE_LENGTH = STATE_CRC_AT + 4  # 807
 CRC = struct.Struct("<I")
 _INT16_MIN, _INT16_MAX = -0x8000, 0x7FFF
 _UNUSED_MOTOR_STATE = (0, 0.0, 0.0, 0, 0, 0.0, 0.0, 0, 0)
-_BIT_REVERSED_BYTES = bytes(int(f"{b:08b}"[::-1], 2) for b in range(256))
 
 
 class WireError(ValueError):
     """A datagram that cannot be a Go1 low-level message."""
-
-
-def crc32(data: bytes) -> int:
-    """The SDK's CRC of a datagram (the value it stores in the last 4 bytes).
-
-    The SDK runs CRC-32/MPEG-2 (polynomial 0x04C11DB7, initial value 0xFFFFFFFF, no
-    reflection, no final XOR) over the datagram as little-endian 32-bit words, each word's bits
-    most significant first, covering ``len(data) // 4 - 1`` words: the CRC field and, for a
-    length that is not a multiple of 4, the bytes before it are not covered. zlib's CRC-32 is
-    the reflected form of the same polynomial, so it gives the same value on bit-reversed
-    words, bit-reversed back.
-    """
-    n_words = len(data) // 4 - 1
-    words = np.frombuffer(data, dtype="<u4", count=n_words).byteswap().tobytes()
-    reflected = zlib.crc32(words.translate(_BIT_REVERSED_BYTES)) ^ 0xFFFFFFFF
-    return int(f"{reflected:032b}"[::-1], 2)
 
 
 def _with_crc(buf: bytearray, crc_at: int) -> bytes:

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from quaddance.deploy.dds import init_dds, load_sdk2, polled_reader
+from quaddance.deploy.go2_wire import seal_low_cmd
 from quaddance.deploy.remote import decode_remote
 from quaddance.deploy.robot import JointCommand, Reading, Robot, realtime_priority
 from quaddance.errors import QuaddanceError
@@ -41,16 +42,9 @@ LOOP_RT_PRIORITY = 15
 RPC_TIMEOUT_S = 1.0  #: the motion switcher's answer to one call
 
 
-@functools.cache
-def sdk_crc() -> Any:
-    """The SDK's CRC of LowCmd_ / LowState_ (made once: its constructor loads a library)."""
-    from unitree_sdk2py.utils.crc import CRC
-
-    return CRC()
-
-
-def fill_low_cmd(msg: Any, cmd: JointCommand, robot: RobotCfg) -> None:
-    """Write a `JointCommand` (model order) into an SDK ``LowCmd_``, servo mode, with its CRC."""
+def fill_low_cmd(msg: Any, cmd: JointCommand, robot: RobotCfg) -> bytes:
+    """Write a `JointCommand` (model order) into an SDK ``LowCmd_``, servo mode, with its CRC;
+    returns it serialized."""
     msg.head[:] = HEAD
     msg.level_flag = LOWLEVEL
     q, dq, tau = (robot.to_sdk(v) for v in (cmd.q_rad, cmd.dq_rad_s, cmd.tau_ff_nm))
@@ -59,11 +53,11 @@ def fill_low_cmd(msg: Any, cmd: JointCommand, robot: RobotCfg) -> None:
         m.mode = SERVO_MODE
         m.q, m.dq, m.tau = float(q[i]), float(dq[i]), float(tau[i])
         m.kp, m.kd = float(kp[i]), float(kd[i])
-    msg.crc = sdk_crc().Crc(msg)
+    return seal_low_cmd(msg)
 
 
-def freeze_serialized(msg: Any, wire: bytes | None = None) -> None:
-    """Have the writes of ``msg`` send ``wire`` (by default: ``msg`` serialized now) until
+def freeze_serialized(msg: Any, wire: bytes) -> None:
+    """Have the writes of ``msg`` send ``wire`` (``msg`` serialized by `go2_wire`) until
     frozen again.
 
     cyclonedds-python serializes in Python, ~0.5 ms for a LowCmd_: done 500 times a second
@@ -71,8 +65,7 @@ def freeze_serialized(msg: Any, wire: bytes | None = None) -> None:
     that changes 50 times a second. A writer sends what ``sample.serialize(use_version_2=None)``
     returns (None: the SDK's channels set no data representation).
     """
-    frozen = type(msg).serialize(msg) if wire is None else wire
-    msg.serialize = lambda **_: frozen
+    msg.serialize = lambda **_: wire
 
 
 def reading_from_low_state(state: Any, robot: RobotCfg) -> Reading:
@@ -193,8 +186,7 @@ class Go2Robot(Robot):
             with self._lock:
                 cmd = self._cmd
             if cmd is not packed:  # once per runner command, not 10 times
-                fill_low_cmd(msg, cmd, self.robot_cfg)
-                freeze_serialized(msg)
+                freeze_serialized(msg, fill_low_cmd(msg, cmd, self.robot_cfg))
                 packed = cmd
             self._pub.Write(msg)
             self.sent += 1

@@ -12,21 +12,20 @@ from __future__ import annotations
 
 import json
 import os
-import struct
 import threading
 from typing import Any
 
 import numpy as np
 
-from quaddance.deploy.dds import GO2_DOMAIN_ID, init_dds, polled_reader
+from quaddance.deploy.dds import GO2_DOMAIN_ID, init_dds, polled_reader, take_serialized
 from quaddance.deploy.go2_backend import (
     LOW_CMD_TOPIC,
     LOW_STATE_TOPIC,
     SERVO_MODE,
     Go2Robot,
     freeze_serialized,
-    sdk_crc,
 )
+from quaddance.deploy.go2_wire import LowCmdMotors, decode_low_cmd, seal_low_state
 from quaddance.deploy.remote import encode_remote
 from quaddance.deploy.robot import JointCommand
 from quaddance.deploy.simulator import (
@@ -44,65 +43,19 @@ _INT16_MAX = 32767
 COMMAND_QUEUE = 64
 
 
-def _xcdr1(*fields: str) -> struct.Struct:
-    """A flat struct layout as XCDR1 lays it out: little-endian, each field aligned to its
-    size from the payload's start (fields as struct codes with a count: "4f", "B")."""
-    fmt, offset = "<", 0
-    for f in fields:
-        size = struct.calcsize("<" + f[-1])
-        pad = -offset % size
-        fmt += "x" * pad + f
-        offset += pad + int(f[:-1] or 1) * size
-    return struct.Struct(fmt)
-
-
-# rt/lowstate goes out 500 times a second, and cyclonedds-python serializes a LowState_ in
-# Python (~0.6 ms: a third of a core at that rate); struct does it in ~15 us. The fields in
-# the IDL's order (head .. bandwidth, imu_state, 20 motor_state, bms_state, foot_force ..
-# crc); test_go2_dds pins the bytes to cyclonedds's own.
-_XCDR1_LE = b"\x00\x01\x00\x00"  #: the encapsulation header: plain CDR, little-endian
-_MOTOR_STATE = ("B", "7f", "B", "I", "2I")
-_LOW_STATE = _xcdr1(
-    *("2B", "B", "B", "2I", "2I", "H"),
-    *("4f", "3f", "3f", "3f", "B"),
-    *_MOTOR_STATE * 20,
-    *("B", "B", "B", "B", "i", "H", "2B", "2B", "15H"),
-    *("4h", "4h", "I", "40B", "B", "f", "B", "B", "f", "f", "4H", "I", "I"),
-)
-
-
-def serialize_low_state(msg: Any) -> bytes:
-    """A LowState_ as cyclonedds serializes it (XCDR1, with its header), fast."""
-    i, b = msg.imu_state, msg.bms_state
-    values = [*msg.head, msg.level_flag, msg.frame_reserve, *msg.sn, *msg.version]
-    values += [msg.bandwidth, *i.quaternion, *i.gyroscope, *i.accelerometer, *i.rpy]
-    values.append(i.temperature)
-    for m in msg.motor_state:
-        values += [m.mode, m.q, m.dq, m.ddq, m.tau_est, m.q_raw, m.dq_raw, m.ddq_raw]
-        values += [m.temperature, m.lost, *m.reserve]
-    values += [b.version_high, b.version_low, b.status, b.soc, b.current, b.cycle]
-    values += [*b.bq_ntc, *b.mcu_ntc, *b.cell_vol, *msg.foot_force, *msg.foot_force_est]
-    values += [msg.tick, *msg.wireless_remote, msg.bit_flag, msg.adc_reel]
-    values += [msg.temperature_ntc1, msg.temperature_ntc2, msg.power_v, msg.power_a]
-    values += [*msg.fan_frequency, msg.reserve, msg.crc]
-    return _XCDR1_LE + _LOW_STATE.pack(*values)
-
-
-def joint_command_from_low_cmd(msg: Any, robot: RobotCfg) -> JointCommand:
-    """An SDK ``LowCmd_`` as a `JointCommand` in model order; a motor not in servo mode is
-    idle (no gain, no torque), as the motor boards treat it."""
-    motors = msg.motor_cmd[: robot.num_joints]
-    servo = robot.from_sdk([m.mode == SERVO_MODE for m in motors], signed=False) > 0
-
-    def field(name: str, signed: bool = True) -> np.ndarray:
-        return robot.from_sdk([getattr(m, name) for m in motors], signed)
-
+def joint_command_from_low_cmd(motors: LowCmdMotors, robot: RobotCfg) -> JointCommand:
+    """A ``LowCmd_``'s motor commands as a `JointCommand` in model order; a motor not in
+    servo mode is idle (no gain, no torque), as the motor boards treat it."""
+    n = robot.num_joints
+    servo = robot.from_sdk(motors.mode[:n] == SERVO_MODE, signed=False) > 0
+    q, dq, tau = (robot.from_sdk(v[:n]) for v in (motors.q, motors.dq, motors.tau))
+    kp, kd = (robot.from_sdk(v[:n], signed=False) for v in (motors.kp, motors.kd))
     return JointCommand(
-        q_rad=field("q"),
-        dq_rad_s=field("dq"),
-        kp=np.where(servo, field("kp", signed=False), 0.0),
-        kd=np.where(servo, field("kd", signed=False), 0.0),
-        tau_ff_nm=np.where(servo, field("tau"), 0.0),
+        q_rad=q,
+        dq_rad_s=dq,
+        kp=np.where(servo, kp, 0.0),
+        kd=np.where(servo, kd, 0.0),
+        tau_ff_nm=np.where(servo, tau, 0.0),
     )
 
 
@@ -116,8 +69,9 @@ def rpy_from_quat(quat_wxyz: np.ndarray) -> tuple[float, float, float]:
     )
 
 
-def fill_low_state(msg: Any, state: SensorState, robot: RobotCfg) -> None:
-    """Write a `SensorState` (model order) into an SDK ``LowState_``, with its CRC."""
+def fill_low_state(msg: Any, state: SensorState, robot: RobotCfg) -> bytes:
+    """Write a `SensorState` (model order) into an SDK ``LowState_``, with its CRC; returns
+    it serialized."""
     msg.tick = state.tick & 0xFFFFFFFF
     imu = msg.imu_state
     imu.quaternion[:] = [float(v) for v in state.quat_wxyz]
@@ -133,7 +87,7 @@ def fill_low_state(msg: Any, state: SensorState, robot: RobotCfg) -> None:
     msg.foot_force[:] = [int(f) for f in robot.feet_to_sdk(force)]
     msg.wireless_remote[:] = list(encode_remote(state.remote_keys))
     msg.bms_state.soc = int(np.clip(round(state.battery_pct), 0, 100))
-    msg.crc = sdk_crc().Crc(msg)
+    return seal_low_state(msg)
 
 
 class Go2DdsLink(SimLink):
@@ -147,29 +101,26 @@ class Go2DdsLink(SimLink):
 
         self.robot = robot
         self.rejected = 0
-        self._cmd_type = LowCmd_
         self._state_msg = unitree_go_msg_dds__LowState_()
         self.switcher = MotionSwitcher()
         self._pub = ChannelPublisher(LOW_STATE_TOPIC, LowState_)
         self._pub.Init()
-        # Decoded in `poll`, on the simulator's real-time thread.
+        # Taken and decoded in `poll`, on the simulator's real-time thread.
         self._reader = polled_reader(LOW_CMD_TOPIC, LowCmd_, depth=COMMAND_QUEUE)
 
     def poll(self) -> list[JointCommand | str]:
         out: list[JointCommand | str] = []
-        for msg in self._reader.take(N=COMMAND_QUEUE):
-            if not isinstance(msg, self._cmd_type):  # a disposal notice, no data
-                continue
-            if sdk_crc().Crc(msg) != msg.crc:
+        for data in take_serialized(self._reader, COMMAND_QUEUE):
+            motors = decode_low_cmd(data)
+            if motors is None or not motors.crc_ok:
                 self.rejected += 1
             else:
-                out.append(joint_command_from_low_cmd(msg, self.robot))
+                out.append(joint_command_from_low_cmd(motors, self.robot))
         return out
 
     def publish(self, state: SensorState) -> None:
         msg = self._state_msg
-        fill_low_state(msg, state, self.robot)
-        freeze_serialized(msg, serialize_low_state(msg))
+        freeze_serialized(msg, fill_low_state(msg, state, self.robot))
         self._pub.Write(msg)
 
     def close(self) -> None:
