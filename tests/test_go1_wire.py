@@ -302,6 +302,7 @@ def test_go1_backend_drives_the_link_through_the_sdk(link):
         while not stop.is_set():
             received.extend(link.poll())
             state.tick += 1
+            state.time_s += 0.002
             link.publish(state)
             time.sleep(0.002)
 
@@ -339,7 +340,7 @@ def test_go1_backend_drives_the_link_through_the_sdk(link):
     np.testing.assert_array_equal(got.tau_ff_nm, sent.tau_ff_nm)
     assert link.rejected == 0
     for r in (first, reading):
-        assert r.seq > 1
+        assert r.seq > 2 and r.stamp_s == r.seq / 1000  # the robot's clock, ms
         np.testing.assert_allclose(r.joint_pos_rad, state.joint_pos_rad, rtol=0, atol=1e-6)
         np.testing.assert_allclose(r.joint_vel_rad_s, state.joint_vel_rad_s, rtol=0, atol=1e-6)
         np.testing.assert_allclose(r.quat_wxyz, state.quat_wxyz, rtol=0, atol=1e-6)
@@ -367,4 +368,4 @@ def test_go1_sim_process_answers_the_backend_and_counts_what_it_applied():
     counts = robot.received()
     assert counts["torque_commands"] > 0 and counts["rejected"] == 0
     assert counts["commands"] > counts["torque_commands"]  # the SDK's idle ones came first
-    assert reading.seq in robot.truth()["seq"]
+    assert reading.seq in np.rint(robot.truth()["time_s"] * 1e3)  # the robot's clock, ms

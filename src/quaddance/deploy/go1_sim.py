@@ -62,7 +62,7 @@ def low_state_datagram(state: SensorState, robot: RobotCfg) -> bytes:
     force = np.zeros(len(robot.sdk_foot_index))
     force[list(robot.sdk_foot_index)] = state.foot_force_n
     return wire.encode_low_state(
-        tick=state.tick,
+        tick=state.clock_ms,
         quat_wxyz=state.quat_wxyz,
         gyro_rad_s=state.gyro_rad_s,
         accel_m_s2=state.accel_m_s2,

@@ -72,7 +72,7 @@ def rpy_from_quat(quat_wxyz: np.ndarray) -> tuple[float, float, float]:
 def fill_low_state(msg: Any, state: SensorState, robot: RobotCfg) -> bytes:
     """Write a `SensorState` (model order) into an SDK ``LowState_``, with its CRC; returns
     it serialized."""
-    msg.tick = state.tick & 0xFFFFFFFF
+    msg.tick = state.clock_ms
     imu = msg.imu_state
     imu.quaternion[:] = [float(v) for v in state.quat_wxyz]
     imu.gyroscope[:] = [float(v) for v in state.gyro_rad_s]

@@ -100,7 +100,7 @@ class SensorState:
     """What the simulated robot's sensors read at one instant (model joint order, task foot
     order): what a link turns into its protocol's state message."""
 
-    tick: int  #: +1 per state
+    tick: int  #: +1 per state (the seq of quaddance's own protocol and of the truth)
     time_s: float  #: the robot's clock (simulation time)
     mono_s: float  #: `time.monotonic()` of the measurement (the same machine's clock)
     quat_wxyz: np.ndarray  #: (4,)
@@ -112,6 +112,12 @@ class SensorState:
     foot_force_n: np.ndarray  #: (4,) FL FR RL RR
     battery_pct: float
     remote_keys: int  #: buttons held on the remote (`quaddance.deploy.remote`)
+
+    @property
+    def clock_ms(self) -> int:
+        """The robot's clock in whole milliseconds, as the Go1's and Go2's LowState ``tick``
+        counts (uint32, wrapping)."""
+        return round(self.time_s * 1e3) & 0xFFFFFFFF
 
 
 class SimLink(abc.ABC):
