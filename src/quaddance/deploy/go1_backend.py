@@ -52,12 +52,12 @@ def fill_low_cmd(low_cmd, cmd: JointCommand, robot: RobotCfg) -> None:
     """Write a `JointCommand` (model order) into an SDK ``LowCmd``, servo mode."""
     low_cmd.levelFlag = LOWLEVEL
     motors = low_cmd.motorCmd  # the binding builds this list on every access: once
-    values = (cmd.q_rad, cmd.dq_rad_s, cmd.kp, cmd.kd, cmd.tau_ff_nm)
-    columns = (robot.sdk_joint_index, robot.sdk_joint_sign, *(v.tolist() for v in values))
-    for i, sign, q, dq, kp, kd, tau in zip(*columns, strict=True):
+    q, dq, tau = (robot.to_sdk(v).tolist() for v in (cmd.q_rad, cmd.dq_rad_s, cmd.tau_ff_nm))
+    kp, kd = (robot.to_sdk(v, signed=False).tolist() for v in (cmd.kp, cmd.kd))
+    for i in range(robot.num_joints):
         m = motors[i]
         m.mode = SERVO_MODE
-        m.q, m.dq, m.Kp, m.Kd, m.tau = sign * q, sign * dq, kp, kd, sign * tau
+        m.q, m.dq, m.Kp, m.Kd, m.tau = q[i], dq[i], kp[i], kd[i], tau[i]
 
 
 def reading_from_low_state(state, robot: RobotCfg) -> Reading:
@@ -66,19 +66,15 @@ def reading_from_low_state(state, robot: RobotCfg) -> Reading:
     ``seq`` is the robot's millisecond ``tick``: it advances with every new state. The battery
     is the BMS's state of charge; the remote's buttons come from ``wirelessRemote``.
     """
-    ms = state.motorState
-    motors = list(zip(robot.sdk_joint_index, robot.sdk_joint_sign, strict=True))
-    q = np.array([sign * ms[i].q for i, sign in motors])
-    dq = np.array([sign * ms[i].dq for i, sign in motors])
-    force = np.asarray(state.footForce, dtype=np.float64)
+    motors = state.motorState[: robot.num_joints]
     return Reading(
         seq=int(state.tick),
         stamp_s=int(state.tick) / 1000.0,
         quat_wxyz=np.asarray(state.imu.quaternion, dtype=np.float64),  # SDK order: w, x, y, z
         gyro_rad_s=np.asarray(state.imu.gyroscope, dtype=np.float64),
-        joint_pos_rad=q,
-        joint_vel_rad_s=dq,
-        foot_force_n=force[list(robot.sdk_foot_index)],  # raw sensor units on a Go1, not newtons
+        joint_pos_rad=robot.from_sdk([m.q for m in motors]),
+        joint_vel_rad_s=robot.from_sdk([m.dq for m in motors]),
+        foot_force_n=robot.feet_from_sdk(state.footForce),  # raw sensor units on a Go1, not N
         battery_pct=float(state.bms.SOC),
         remote_keys=decode_remote(state.wirelessRemote),
     )

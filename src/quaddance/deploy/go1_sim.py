@@ -34,42 +34,31 @@ def command_from_frame(frame: wire.LowCmdFrame, robot: RobotCfg) -> JointCommand
     """A decoded LowCmd as the motor boards apply it, in model joint order: a motor not in
     servo mode exerts nothing (kp = kd = tau = 0), and the SDK's stop values of q (dq) turn
     the position (velocity) loop off."""
-    index = list(robot.sdk_joint_index)
-    sign = np.asarray(robot.sdk_joint_sign)
-    servo = frame.mode[index] == wire.SERVO_MODE
-    q, dq = frame.q[index], frame.dq[index]
+    servo = robot.from_sdk(frame.mode == wire.SERVO_MODE, signed=False) > 0
+    q, dq, tau = robot.from_sdk(frame.q), robot.from_sdk(frame.dq), robot.from_sdk(frame.tau)
     position_on = servo & (np.abs(q) < wire.POS_STOP_F)
     velocity_on = servo & (np.abs(dq) < wire.VEL_STOP_F)
     return JointCommand(
-        q_rad=np.where(position_on, sign * q, 0.0),
-        dq_rad_s=np.where(velocity_on, sign * dq, 0.0),
-        kp=np.where(position_on, frame.kp[index], 0.0),
-        kd=np.where(velocity_on, frame.kd[index], 0.0),
-        tau_ff_nm=np.where(servo, sign * frame.tau[index], 0.0),
+        q_rad=np.where(position_on, q, 0.0),
+        dq_rad_s=np.where(velocity_on, dq, 0.0),
+        kp=np.where(position_on, robot.from_sdk(frame.kp, signed=False), 0.0),
+        kd=np.where(velocity_on, robot.from_sdk(frame.kd, signed=False), 0.0),
+        tau_ff_nm=np.where(servo, tau, 0.0),
     )
 
 
 def low_state_datagram(state: SensorState, robot: RobotCfg) -> bytes:
     """A `SensorState` (model joint order, task foot order) as the Go1's LowState datagram
-    (SDK motor and foot order, signs of `RobotCfg.sdk_joint_sign`)."""
-    n = robot.num_joints
-    index = list(robot.sdk_joint_index)
-    sign = np.asarray(robot.sdk_joint_sign)
-    q, dq, tau = np.zeros(n), np.zeros(n), np.zeros(n)
-    q[index] = sign * state.joint_pos_rad
-    dq[index] = sign * state.joint_vel_rad_s
-    tau[index] = sign * state.joint_tau_nm
-    force = np.zeros(len(robot.sdk_foot_index))
-    force[list(robot.sdk_foot_index)] = state.foot_force_n
+    (SDK motor and foot order, SDK signs: `RobotCfg.to_sdk`)."""
     return wire.encode_low_state(
         tick=state.clock_ms,
         quat_wxyz=state.quat_wxyz,
         gyro_rad_s=state.gyro_rad_s,
         accel_m_s2=state.accel_m_s2,
-        q=q,
-        dq=dq,
-        tau_est=tau,
-        foot_force=force,
+        q=robot.to_sdk(state.joint_pos_rad),
+        dq=robot.to_sdk(state.joint_vel_rad_s),
+        tau_est=robot.to_sdk(state.joint_tau_nm),
+        foot_force=robot.feet_to_sdk(state.foot_force_n),
         wireless_remote=encode_remote(state.remote_keys),
         battery_soc=min(max(round(state.battery_pct), 0), 100),
     )
