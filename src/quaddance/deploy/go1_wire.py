@@ -20,13 +20,13 @@ last 4 of them, so a shorter datagram fails the CRC and a longer one is cut.
 
 from __future__ import annotations
 
-import math
 import struct
 from dataclasses import dataclass
 
 import numpy as np
 
 from quaddance.deploy.go1_backend import LOWLEVEL, SERVO_MODE
+from quaddance.deploy.simulator import rpy_from_quat
 from quaddance.deploy.unitree_crc import crc32
 
 HEAD = b"\xfe\xef"
@@ -154,7 +154,7 @@ def encode_low_state(
     buf = bytearray(LOW_STATE_LENGTH)
     HEADER.pack_into(buf, 0, HEAD, LOWLEVEL, 0, 0, 0, 0, 0, 0)
     quat = [float(v) for v in quat_wxyz]
-    imu = (*quat, *map(float, gyro_rad_s), *map(float, accel_m_s2), *_rpy_from_quat(*quat))
+    imu = (*quat, *map(float, gyro_rad_s), *map(float, accel_m_s2), *rpy_from_quat(quat))
     IMU.pack_into(buf, IMU_AT, *imu, 0)
     tau_int = np.trunc(np.asarray(tau_est, dtype=np.float64) * TAU_EST_SCALE)
     motors: list[float | int] = []
@@ -171,11 +171,3 @@ def encode_low_state(
 def _int16(value: float) -> int:
     """``value`` saturated to int16."""
     return int(min(max(value, _INT16_MIN), _INT16_MAX))
-
-
-def _rpy_from_quat(w: float, x: float, y: float, z: float) -> tuple[float, float, float]:
-    """Roll, pitch, yaw (rad, Z-Y-X) of a unit quaternion."""
-    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
-    pitch = math.asin(min(max(2 * (w * y - z * x), -1.0), 1.0))
-    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-    return roll, pitch, yaw

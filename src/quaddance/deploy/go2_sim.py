@@ -33,6 +33,7 @@ from quaddance.deploy.simulator import (
     SensorState,
     SimLink,
     SimRobotCfg,
+    rpy_from_quat,
     run_sim_process,
 )
 from quaddance.robots import GO2, RobotCfg, get_robot
@@ -56,16 +57,6 @@ def joint_command_from_low_cmd(motors: LowCmdMotors, robot: RobotCfg) -> JointCo
         kp=np.where(servo, kp, 0.0),
         kd=np.where(servo, kd, 0.0),
         tau_ff_nm=np.where(servo, tau, 0.0),
-    )
-
-
-def rpy_from_quat(quat_wxyz: np.ndarray) -> tuple[float, float, float]:
-    """Roll, pitch, yaw (rad, z-y-x) of a unit quaternion, as the Go2's IMU reports them."""
-    w, x, y, z = (float(v) for v in quat_wxyz)
-    return (
-        float(np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))),
-        float(np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))),
-        float(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))),
     )
 
 

@@ -20,6 +20,7 @@ import abc
 import argparse
 import dataclasses
 import json
+import math
 import os
 import socket
 import subprocess
@@ -27,7 +28,7 @@ import sys
 import tempfile
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -81,6 +82,17 @@ class SimRobotCfg:
     def from_json(cls, text: str) -> SimRobotCfg:
         raw = json.loads(text)
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in raw.items()})
+
+
+def rpy_from_quat(quat_wxyz: Sequence[float]) -> tuple[float, float, float]:
+    """Roll, pitch, yaw (rad, z-y-x) of a unit quaternion (w, x, y, z): the trunk's truth, and
+    what the Go1's and Go2's IMUs report."""
+    w, x, y, z = (float(v) for v in quat_wxyz)
+    return (
+        math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y)),
+        math.asin(min(max(2 * (w * y - z * x), -1.0), 1.0)),
+        math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)),
+    )
 
 
 def build_torque_model(cfg: SimRobotCfg) -> mujoco.MjModel:
@@ -324,12 +336,7 @@ class SimulatedRobot:
         t["base_height_m"][i] = d.qpos[2]
         up_z = 1 - 2 * (d.qpos[4] ** 2 + d.qpos[5] ** 2)  # world z of the trunk's z axis
         t["tilt_rad"][i] = np.arccos(np.clip(up_z, -1.0, 1.0))
-        w, x, y, z = d.qpos[3:7]
-        t["rpy_rad"][i] = (
-            np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y)),
-            np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0)),
-            np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)),
-        )
+        t["rpy_rad"][i] = rpy_from_quat(d.qpos[3:7])
         t["trunk_contact"][i] = trunk_contact
         t["tau_nm"][i] = self.tau
         self.n_truth += 1
