@@ -68,8 +68,10 @@ def _compare(policy, song: Path, seconds: float, backend: str, log) -> tuple[dic
     from quaddance.play.dance import feasible_max_height_m, spec_for_policy
     from quaddance.play.metrics import feasible_mask, tracking_metrics
     from quaddance.play.rollout import rollout
+    from quaddance.targets import TargetConfig
 
-    dance, _ = make_dance(song, None, spec_for_policy(DanceSpec(), policy))
+    spec = DanceSpec(targets=TargetConfig(robot=policy.robot))
+    dance, _ = make_dance(song, None, spec_for_policy(spec, policy))
     n = min(dance.targets_m.shape[0], round(seconds * policy.task.policy_hz))
     feasible_max = feasible_max_height_m(policy)
     played = rollout(dance, policy)
@@ -112,8 +114,9 @@ def run(seconds: float = 20.0, log: Callable[[str], None] = print, backend: str 
     the Go1's)."""
     from quaddance.deploy.job import BACKENDS
     from quaddance.play.policy import OnnxPolicy, shipped_policy_path
+    from quaddance.robots import get_robot
 
-    policy_path = shipped_policy_path(BACKENDS[backend] or "go1")
+    policy_path = shipped_policy_path(get_robot(BACKENDS[backend] or "go1"))
     policy = OnnxPolicy.load(policy_path)
     songs = {}
     with tempfile.TemporaryDirectory() as tmp:

@@ -7,6 +7,7 @@ Deadlines are measured in dance time from the run's own log, not by timing this 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -16,19 +17,12 @@ from realtime import skip_if_starved
 from quaddance.deploy.job import BACKENDS, BackendOptions, DeployJob, make_robot, run_deploy
 from quaddance.deploy.remote import DAMP_KEYS, KEY_B, KEY_L2, decode_remote, encode_remote
 from quaddance.deploy.runner import DeployOptions, Runner
-from quaddance.deploy.sim_backend import sim_robot
-from quaddance.deploy.simulator import SimRobotCfg
 from quaddance.errors import QuaddanceError
 from quaddance.pipeline import DanceSpec, target_bank
 from quaddance.play.dance import spec_for_policy
 from quaddance.play.policy import OnnxPolicy, shipped_policy_path
 from quaddance.robots import GO1, GO2, get_robot
 from quaddance.targets import TargetConfig
-
-
-@pytest.fixture(scope="module")
-def go1_policy() -> OnnxPolicy:
-    return OnnxPolicy.load(shipped_policy_path(GO1))
 
 
 def targets_for(policy: OnnxPolicy, seconds: float, seed: int = 3) -> np.ndarray:
@@ -58,32 +52,6 @@ def test_the_remote_layout_round_trips_the_vendors_button_bits():
 def test_each_backend_drives_its_robot_model(backend, policy_robot, message):
     with pytest.raises(QuaddanceError, match=message):
         make_robot(BackendOptions(robot=backend), policy_robot)
-
-
-def test_a_low_battery_refuses_the_start_before_any_command(go1_policy):
-    robot = sim_robot(SimRobotCfg(battery_pct=12.0))
-    runner = Runner(robot, go1_policy, targets_for(go1_policy, 2.0), DeployOptions())
-    with pytest.raises(QuaddanceError, match="battery at 12 %, below 25 %"):
-        runner.run()
-    assert robot.received()["commands"] == 0
-
-
-def test_the_remotes_damping_buttons_damp_at_once(go1_policy, tmp_path):
-    robot = make_robot(BackendOptions(), GO1)
-    pressed: list[float] = []
-
-    def press_at_1s(tick) -> None:
-        if tick.t_dance >= 1.0 and not pressed:
-            pressed.append(tick.t_dance)
-            robot.press(DAMP_KEYS)
-
-    opts = DeployOptions(seconds=3.0, auto_start=True)
-    targets = targets_for(go1_policy, 3.0)
-    summary = Runner(robot, go1_policy, targets, opts, on_tick=press_at_1s).run().summary
-    damp = [e for e in summary["events"] if e["to"] == "damp"]
-    assert damp and damp[0]["reason"] == "the remote's L2 + B", summary["events"]
-    # The press travels the state stream's latency (<= 10 ms each way) to the next tick.
-    assert 0 <= damp[0]["t_s"] - pressed[0] <= 0.1, (damp, pressed)
 
 
 def test_dry_run_checks_the_state_and_sends_nothing(tmp_path, monkeypatch):
@@ -121,7 +89,11 @@ PROTOCOL_SIMS = ["go1-sim", "go2-sim"]
 
 @pytest.fixture(scope="module")
 def policies() -> dict[str, OnnxPolicy]:
-    return {b: OnnxPolicy.load(shipped_policy_path(get_robot(BACKENDS[b]))) for b in PROTOCOL_SIMS}
+    """The shipped policy of each simulated backend's robot (`sim`: the Go1's)."""
+    return {
+        b: OnnxPolicy.load(shipped_policy_path(get_robot(BACKENDS[b] or "go1")))
+        for b in ("sim", *PROTOCOL_SIMS)
+    }
 
 
 def run_backend(backend: str, policy: OnnxPolicy, seconds: float, inject=()) -> tuple[dict, dict]:
@@ -215,3 +187,70 @@ def test_dry_run_checks_fail_on_what_a_bad_set_up_reads(monkeypatch):
     monkeypatch.setattr(job_module, "run_deploy", lambda job, status: (failed, {}))
     result = CliRunner().invoke(app, ["deploy", "--dry-run"])
     assert result.exit_code == 1 and "dry run FAILED" in result.output, result.output
+
+
+@pytest.mark.parametrize("backend", ["sim", *PROTOCOL_SIMS])
+def test_a_low_battery_refuses_the_start_before_any_command(backend, policies):
+    policy = policies[backend]
+    robot = make_robot(BackendOptions(robot=backend), policy.task.scene.robot)
+    robot.cfg = dataclasses.replace(robot.cfg, battery_pct=12.0)  # before it starts
+    runner = Runner(robot, policy, targets_for(policy, 2.0), DeployOptions())
+    with pytest.raises(QuaddanceError, match="battery at 12 %, below 25 %"):
+        runner.run()
+    assert robot.received()["torque_commands"] == 0
+
+
+@pytest.mark.parametrize("backend", ["sim", *PROTOCOL_SIMS])
+def test_the_remotes_damping_buttons_damp_at_once(backend, policies):
+    """L2 + B held on the remote reaches the runner in the robot's own state message."""
+    policy = policies[backend]
+    robot = make_robot(BackendOptions(robot=backend), policy.task.scene.robot)
+    pressed: list[float] = []
+
+    def press_at_1s(tick) -> None:
+        if tick.t_dance >= 1.0 and not pressed:
+            pressed.append(tick.t_dance)
+            robot.press(DAMP_KEYS)
+
+    opts = DeployOptions(seconds=3.0, auto_start=True)
+    targets = targets_for(policy, 3.0)
+    summary = Runner(robot, policy, targets, opts, on_tick=press_at_1s).run().summary
+    damp = [e for e in summary["events"] if e["to"] == "damp"]
+    assert damp and damp[0]["reason"] == "the remote's L2 + B", summary["events"]
+    # The press travels the state stream's latency (<= 10 ms each way) to the next tick.
+    assert 0 <= damp[0]["t_s"] - pressed[0] <= 0.1, (damp, pressed)
+
+
+def test_bench_deploy_robot_runs_that_backend_with_its_robots_policy(tmp_path, monkeypatch):
+    """`bench deploy --robot go2-sim`: the Go2 policy, every run on go2-sim, its own file."""
+    from typer.testing import CliRunner
+
+    from benchmarks import deploy as bench
+    from quaddance.cli import app
+
+    ran: list[tuple[str, str]] = []
+    mae = {f: {"mae_m": 0.002} for f in ("fl", "fr")}
+
+    def compare(policy, song, seconds, backend, log):
+        ran.append((policy.robot.name, backend))
+        run = {"front_mae_mean_m": 0.002, "falls": 0, "tick_ms": {}}
+        return {"dance": run, "deploy_sim": run}, np.zeros((50, 4))
+
+    def deploy(policy, targets, seconds, backend, inject=()):
+        ran.append((policy.robot.name, backend))
+        (fault, at_s), t_damp = inject[0], inject[0][1] + 0.05
+        events = [] if fault == "lag" else [{"to": "damp", "t_s": t_damp, "reason": fault}]
+        return {"injected": [{"fault": fault, "t_s": at_s}], "events": events, "falls": 0,
+                "final_state": "done" if fault == "lag" else "damp", "front": mae,
+                "sim": {"late_ms": {"max": 1.0}}}  # fmt: skip
+
+    monkeypatch.setattr(bench, "_compare", compare)
+    monkeypatch.setattr(bench, "_deploy", deploy)
+    monkeypatch.chdir(tmp_path)
+    result = CliRunner().invoke(app, ["bench", "deploy", "--robot", "go2-sim", "--seconds", "1"])
+    assert result.exit_code == 0, result.output
+    assert set(ran) == {(GO2.name, "go2-sim")} and len(ran) == 3 + 4
+    report = json.loads((tmp_path / "benchmarks/results/deploy_go2-sim.json").read_text())
+    assert report["backend"] == "go2-sim" and report["policy"] == "go2_dance.onnx"
+    bad = CliRunner().invoke(app, ["bench", "deploy", "--robot", "go2"])
+    assert bad.exit_code == 2 and "--robot must be one of sim, go1-sim, go2-sim" in bad.output
