@@ -252,5 +252,6 @@ def test_bench_deploy_robot_runs_that_backend_with_its_robots_policy(tmp_path, m
     assert set(ran) == {(GO2.name, "go2-sim")} and len(ran) == 3 + 4
     report = json.loads((tmp_path / "benchmarks/results/deploy_go2-sim.json").read_text())
     assert report["backend"] == "go2-sim" and report["policy"] == "go2_dance.onnx"
-    bad = CliRunner().invoke(app, ["bench", "deploy", "--robot", "go2"])
-    assert bad.exit_code == 2 and "--robot must be one of sim, go1-sim, go2-sim" in bad.output
+    bad = CliRunner().invoke(app, ["bench", "deploy", "--robot", "go2"])  # never a real one
+    assert isinstance(bad.exception, QuaddanceError)
+    assert "--robot must be one of sim, go1-sim, go2-sim" in str(bad.exception)

@@ -13,6 +13,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 import soundfile as sf
+from realtime import skip_if_starved
 
 from quaddance.choreo.accents import beat_coverage, motion_accents_s
 from quaddance.live.choreographer import (
@@ -206,7 +207,10 @@ def test_live_from_file_dances_in_real_time(song, tmp_path, backend):
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert wall_s >= 9.0  # the song is fed at real-time pace, never faster
     live = json.loads((tmp_path / "live.json").read_text())
-    assert live["duration_s"] == pytest.approx(9.0, abs=0.1)
+    deployed = json.loads((tmp_path / "deploy.json").read_text())
+    if live["final_state"] != "done":
+        skip_if_starved(deployed)  # the machine's failure, not the code's
+    assert live["duration_s"] == pytest.approx(9.0, abs=0.1), deployed["events"]
     assert live["falls"] == 0 and live["final_state"] == "done"
     assert live["lock_s"] is not None and live["lock_s"] < 6.0
     beats = np.asarray(live["beats_s"])
@@ -219,7 +223,6 @@ def test_live_from_file_dances_in_real_time(song, tmp_path, backend):
         assert set(z.files) == set(ROLLOUT_KEYS)
         assert z["time_s"].size == pytest.approx(9.0 * HZ, abs=3)
         assert z["beats_s"].size == beats.size
-    deployed = json.loads((tmp_path / "deploy.json").read_text())
     assert deployed["robot"] == backend and deployed["sim"]["rejected"] == 0
 
 
