@@ -16,3 +16,16 @@ def skip_if_starved(summary: dict) -> None:
             f"machine too loaded for a real-time run ({summary['priority']}): simulated "
             f"robot up to {late:.0f} ms late, runner ticks up to {period:.0f} ms apart"
         )
+
+
+def skip_if_stalled_before(summary: dict, t_s: float) -> None:
+    """Skip when the robot's state stream stalled (a damp on stale states) before dance time
+    ``t_s``, when the test's own event comes: the run never reached what the test checks.
+    go2-sim's stream has stalled early in about one run in ten on this 2-core machine, with
+    the simulator, the runner and the DDS threads sharing its cores."""
+    damp = [e for e in summary["events"] if e["to"] == "damp"]
+    if damp and "no new state" in damp[0]["reason"] and damp[0]["t_s"] < t_s:
+        pytest.skip(
+            f"{summary['robot']}: the state stream stalled at {damp[0]['t_s']:.2f} s, before "
+            f"the test's event at {t_s:g} s (a real-time run on a shared machine)"
+        )

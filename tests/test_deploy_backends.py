@@ -12,7 +12,7 @@ import json
 
 import numpy as np
 import pytest
-from realtime import skip_if_starved
+from realtime import skip_if_stalled_before, skip_if_starved
 
 from quaddance.deploy.job import BACKENDS, BackendOptions, DeployJob, make_robot, run_deploy
 from quaddance.deploy.remote import DAMP_KEYS, KEY_B, KEY_L2, decode_remote, encode_remote
@@ -108,6 +108,7 @@ def test_a_dance_through_the_vendor_sdk_rides_out_lag(backend, policies):
     summary, received = run_backend(backend, policies[backend], 6.0, [("lag", 4.0)])
     if summary["final_state"] != "done":
         skip_if_starved(summary)
+        skip_if_stalled_before(summary, 4.0)
     assert summary["final_state"] == "done", summary["events"]
     assert summary["falls"] == 0 and summary["duration_s"] == pytest.approx(6.0, abs=0.05)
     maes = [summary["front"][f]["mae_m"] for f in ("fl", "fr")]
@@ -121,6 +122,7 @@ def test_a_dance_through_the_vendor_sdk_rides_out_lag(backend, policies):
 @pytest.mark.parametrize(("fault", "deadline_s"), [("push", 1.5), ("freeze", 0.1), ("nan", 0.06)])
 def test_faults_reach_the_protocol_simulators_and_end_in_damp(backend, fault, deadline_s, policies):
     summary, _ = run_backend(backend, policies[backend], 3.0, [(fault, 1.0)])
+    skip_if_stalled_before(summary, 1.0)
     assert summary["final_state"] == "damp", summary["events"]
     (inj,) = summary["injected"]
     damp = [e for e in summary["events"] if e["to"] == "damp"]
@@ -215,6 +217,7 @@ def test_the_remotes_damping_buttons_damp_at_once(backend, policies):
     opts = DeployOptions(seconds=3.0, auto_start=True)
     targets = targets_for(policy, 3.0)
     summary = Runner(robot, policy, targets, opts, on_tick=press_at_1s).run().summary
+    skip_if_stalled_before(summary, pressed[0] if pressed else float("inf"))
     damp = [e for e in summary["events"] if e["to"] == "damp"]
     assert damp and damp[0]["reason"] == "the remote's L2 + B", summary["events"]
     # The press travels the state stream's latency (<= 10 ms each way) to the next tick.

@@ -13,7 +13,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 import soundfile as sf
-from realtime import skip_if_starved
+from realtime import skip_if_stalled_before, skip_if_starved
 
 from quaddance.choreo.accents import beat_coverage, motion_accents_s
 from quaddance.live.choreographer import (
@@ -210,6 +210,7 @@ def test_live_from_file_dances_in_real_time(song, tmp_path, backend):
     deployed = json.loads((tmp_path / "deploy.json").read_text())
     if live["final_state"] != "done":
         skip_if_starved(deployed)  # the machine's failure, not the code's
+        skip_if_stalled_before(deployed, 9.0)
     assert live["duration_s"] == pytest.approx(9.0, abs=0.1), deployed["events"]
     assert live["falls"] == 0 and live["final_state"] == "done"
     assert live["lock_s"] is not None and live["lock_s"] < 6.0
