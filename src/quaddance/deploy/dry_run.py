@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from quaddance.deploy.robot import Reading, Robot
-from quaddance.deploy.safety import SafetyCfg, joint_range_rad
+from quaddance.deploy.safety import SafetyCfg, battery_problem, joint_range_rad
 from quaddance.robots import RobotCfg
 
 
@@ -73,7 +73,7 @@ def check_readings(
     battery = readings[-1].battery_pct
     min_pct = SafetyCfg().min_battery_pct
     checks["battery"] = {
-        "ok": bool(not np.isfinite(battery) or battery >= min_pct),
+        "ok": battery_problem(battery, min_pct) is None,
         "detail": f"{battery:.0f} % (a run needs {min_pct:g} %)"
         if np.isfinite(battery)
         else "not reported",

@@ -44,6 +44,14 @@ def roll_pitch_rad(
     return np.arctan2(-gy, -gz), np.arctan2(gx, np.hypot(gy, gz))
 
 
+def battery_problem(pct: float, min_pct: float) -> str | None:
+    """Why a battery at ``pct`` % must not start a run (None: it may, or it is not
+    reported)."""
+    if np.isfinite(pct) and pct < min_pct:
+        return f"battery at {pct:.0f} %, below {min_pct:g} %: charge it first"
+    return None
+
+
 @dataclass(frozen=True)
 class SafetyCfg:
     """Timings of the safety layer; ticks are policy ticks (50 Hz). Its limits are the
@@ -152,10 +160,7 @@ class Safety:
 
     def check_battery(self, reading: Reading) -> str | None:
         """Why the run must not start (None: it may): a battery below `min_battery_pct`."""
-        pct = reading.battery_pct
-        if np.isfinite(pct) and pct < self.cfg.min_battery_pct:
-            return f"battery at {pct:.0f} %, below {self.cfg.min_battery_pct:g} %: charge it first"
-        return None
+        return battery_problem(reading.battery_pct, self.cfg.min_battery_pct)
 
     def check_posture(self, gravity_b: np.ndarray, trunk_height_m: float) -> str | None:
         """Toppling or collapsing: roll/pitch past the limit, or the trunk too low."""
