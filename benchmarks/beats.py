@@ -527,35 +527,80 @@ def _librosa_default_beats_s(y: np.ndarray, sr: int) -> tuple[float, np.ndarray]
     return float(np.atleast_1d(tempo)[0]), librosa.frames_to_time(frames, sr=sr)
 
 
-# madmom's RNN + DBN beat tracker (Boeck et al. 2016), run in another interpreter: madmom needs
-# numpy < 2 and old Pythons, so it cannot live in our environment. argv[1] lists wav paths;
-# stdout gets {path: [beat times, s]}.
+# madmom (Boeck et al. 2016), run in another interpreter: madmom 0.16 needs numpy < 1.24, so it
+# cannot live in our environment (scripts/install_madmom.sh builds one). argv[1] lists wav
+# paths, argv[2] the trackers; stdout gets {path: {tracker: [times, s]}}. "dbn": the offline
+# RNN + DBN beat tracker; "online": the forward RNNs with the DBN in online mode (each beat
+# decided when its frame arrives); "downbeats": the RNN + DBN downbeat tracker, 3/4 or 4/4.
 _MADMOM_SCRIPT = """
-import json, sys
+import json, sys, warnings
+warnings.simplefilter("ignore")
 from madmom.features.beats import DBNBeatTrackingProcessor, RNNBeatProcessor
-rnn, dbn = RNNBeatProcessor(), DBNBeatTrackingProcessor(fps=100)
-out = {p: [float(t) for t in dbn(rnn(p))] for p in json.loads(sys.argv[1])}
+from madmom.features.downbeats import DBNDownBeatTrackingProcessor, RNNDownBeatProcessor
+paths, trackers = json.loads(sys.argv[1]), json.loads(sys.argv[2])
+out = {}
+for p in paths:
+    row = {}
+    if "dbn" in trackers:
+        row["dbn"] = DBNBeatTrackingProcessor(fps=100)(RNNBeatProcessor()(p)).tolist()
+    if "online" in trackers:
+        act = RNNBeatProcessor(online=True)(p)
+        row["online"] = DBNBeatTrackingProcessor(fps=100, online=True)(act).tolist()
+    if "downbeats" in trackers:
+        act = RNNDownBeatProcessor()(p)
+        beats = DBNDownBeatTrackingProcessor(beats_per_bar=[3, 4], fps=100)(act)
+        row["downbeats"] = [float(t) for t, k in beats if int(k) == 1]
+    out[p] = row
+    print(p, file=sys.stderr, flush=True)
 print(json.dumps(out))
 """
 
+MADMOM_TRACKERS = ("dbn", "online", "downbeats")
+"""What `madmom_tracks` can run: offline beats, online beats, offline downbeats."""
 
 MADMOM_SR = 44100
-"""Sample rate of the renderings given to madmom, Hz (its models' rate)."""
+"""Sample rate of the audio given to madmom, Hz (its models' rate)."""
+
+MADMOM_VENV = Path(__file__).resolve().parents[1] / ".madmom" / "venv"
+"""Where scripts/install_madmom.sh puts madmom's own environment (in the checkout)."""
 
 
-def madmom_beats_s(python: str | Path, wav_paths: list[Path]) -> dict[str, np.ndarray]:
-    """Beat times from madmom's DBN tracker, run by ``python`` (an interpreter with madmom).
+def default_madmom_python() -> Path | None:
+    """The interpreter of scripts/install_madmom.sh's environment, if it was built; else None."""
+    python = MADMOM_VENV / "bin" / "python"
+    return python if python.is_file() else None
+
+
+def madmom_tracks(
+    python: str | Path, wav_paths: list[Path], trackers: tuple[str, ...] = ("dbn",)
+) -> dict[str, dict[str, np.ndarray]]:
+    """Run madmom's ``trackers`` (of `MADMOM_TRACKERS`) by ``python`` on each wav file.
 
     Returns:
-        {wav path as str: (n,) beat times, s}.
+        {wav path as str: {tracker: (n,) times, s}}.
     """
     import json
 
-    cmd = [str(python), "-c", _MADMOM_SCRIPT, json.dumps([str(p) for p in wav_paths])]
-    result = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    unknown = sorted(set(trackers) - set(MADMOM_TRACKERS))
+    if unknown:
+        raise QuaddanceError(f"unknown madmom tracker(s) {unknown}; known: {MADMOM_TRACKERS}")
+    cmd = [str(python), "-c", _MADMOM_SCRIPT, json.dumps([str(p) for p in wav_paths]),
+           json.dumps(list(trackers))]  # fmt: skip
+    try:
+        result = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    except OSError as e:
+        raise QuaddanceError(f"cannot run madmom's interpreter {python}: {e}") from None
     if result.returncode != 0:
         raise QuaddanceError(f"madmom run by {python} failed: {result.stderr.strip()[-300:]}")
-    return {k: np.asarray(v, dtype=float) for k, v in json.loads(result.stdout).items()}
+    return {
+        path: {k: np.asarray(v, dtype=float) for k, v in row.items()}
+        for path, row in json.loads(result.stdout).items()
+    }
+
+
+def madmom_beats_s(python: str | Path, wav_paths: list[Path]) -> dict[str, np.ndarray]:
+    """Beat times from madmom's offline DBN tracker, run by ``python``: {wav path: (n,) s}."""
+    return {p: row["dbn"] for p, row in madmom_tracks(python, wav_paths).items()}
 
 
 SETS = ("tuning", "random", "untuned")

@@ -50,6 +50,17 @@ def bench_live_cmd(
             max=16,
         ),
     ] = 1,
+    madmom_python: Annotated[
+        Path | None,
+        typer.Option(
+            help="A Python interpreter that can import madmom: also score madmom's online "
+            "tracker on the real-music sets. Default: scripts/install_madmom.sh's environment "
+            "(.madmom/venv), when it is there."
+        ),
+    ] = None,
+    no_madmom: Annotated[
+        bool, typer.Option("--no-madmom", help="Leave madmom out even where it is installed.")
+    ] = False,
 ) -> None:
     """Online beat tracking vs the offline analyser (lock time, F-measure) on songs with exact
     beats not tuned on, heard from their start and joined mid-song (also: after a quiet room,
@@ -65,6 +76,7 @@ def bench_live_cmd(
 
     console = Console(stderr=True)
     chosen = tuple(s.strip() for s in sets.split(",") if s.strip())
+    madmom_python = _madmom_python(madmom_python, no_madmom, console)
     with console.status("Tracking beats online...") as status:
         results = {
             "tracker": bench_live_tracker(
@@ -72,6 +84,7 @@ def bench_live_cmd(
                 n_random=random,
                 progress=lambda n: status.update(f"Tracking {n}..."),
                 shifts=shifts,
+                madmom_python=madmom_python,
             )
         }
     for name, m in results["tracker"]["means"].items():
@@ -80,6 +93,11 @@ def bench_live_cmd(
             f" F online {m['f_online']:.3f} vs offline {m['f_offline']:.3f}; joined mid-song:"
             f" median lock {m['join_lock_s_median']} s, F online {m['join_f_online']:.3f} vs"
             f" offline {m['join_f_offline']:.3f}"
+            + (
+                f"; madmom online {m['f_madmom_online']:.3f} (same span as ours)"
+                if "f_madmom_online" in m
+                else ""
+            )
         )
     goals = results["tracker"]["goals"]
     console.print(
@@ -124,6 +142,18 @@ def bench_live_cmd(
     console.print(f"results: {out}")
 
 
+def _madmom_python(given: Path | None, no_madmom: bool, console: Any) -> Path | None:
+    """The madmom interpreter a bench uses: ``given``, else the installed one, else None."""
+    from benchmarks.beats import default_madmom_python
+
+    if no_madmom:
+        return None
+    python = given if given is not None else default_madmom_python()
+    if python is None:
+        console.print("madmom left out: run scripts/install_madmom.sh to compare with it")
+    return python
+
+
 @app.command("beats")
 def bench_beats_cmd(
     out: Annotated[
@@ -143,10 +173,14 @@ def bench_beats_cmd(
     madmom_python: Annotated[
         Path | None,
         typer.Option(
-            help="A Python interpreter that can import madmom: also score madmom's DBN tracker "
-            "(madmom is not a dependency; install it in a separate environment)."
+            help="A Python interpreter that can import madmom: also score madmom's trackers "
+            "(madmom is not a dependency). Default: the environment that "
+            "scripts/install_madmom.sh builds (.madmom/venv), when it is there."
         ),
     ] = None,
+    no_madmom: Annotated[
+        bool, typer.Option("--no-madmom", help="Leave madmom out even where it is installed.")
+    ] = False,
 ) -> None:
     """Beat F-measure of our analyser, librosa's default (and madmom's) on songs with exact beats.
 
@@ -163,6 +197,7 @@ def bench_beats_cmd(
     from benchmarks.beats import run_beat_bench
 
     console = Console(stderr=True)
+    madmom_python = _madmom_python(madmom_python, no_madmom, console)
     chosen = tuple(s.strip() for s in sets.split(",") if s.strip())
     if "real" in chosen:
         _bench_real_beats(out, madmom_python, console)
@@ -212,7 +247,7 @@ def _bench_real_beats(out: Path, madmom_python: Path | None, console: Any) -> No
         )
     trackers = ["offline", "online", "librosa"]
     if madmom_python is not None:
-        trackers.append("madmom_dbn")
+        trackers += ["madmom_dbn", "madmom_online"]
     table = Table(title="real music, beat F (+-70 ms): strict / at the tracker's metrical level")
     for col in ("song", "split", "kind", "BPM", *trackers, "lock s"):
         table.add_column(col)

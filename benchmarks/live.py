@@ -16,6 +16,11 @@ its first three songs, and its last four (a first held-out set) showed the live 
 seam fault (both front paws up, a fall) and its late first move after a lock. ``heldout``
 (`heldout_songs`) holds live-case songs made after those fixes and never tuned on.
 
+``real`` and ``real-tuning`` are the held-out and tuning parts of the real-music set
+(``benchmarks/real_music``: band recordings and MIDI songs made by people elsewhere, beats from
+their charts); with madmom installed (``scripts/install_madmom.sh``), madmom's online tracker is
+scored on the same span of them.
+
 ``tuning`` (asked for by name, not reported by default) is the beat benchmark's tuning set plus
 `live_tuning_songs`: songs of the untuned set's hard kinds, random MIDI songs from other
 generator seeds and two live-case songs, for tuning the tracker without looking at the sets
@@ -47,9 +52,12 @@ from quaddance.music.live import OnlineTrack, track_samples
 LIVE_CASE_SETS = ("live", "heldout")
 """The sets of live-case songs (`live_case_songs`), which the whole live loop is run on."""
 
-LIVE_SETS = (*BEAT_SETS, *LIVE_CASE_SETS)
-"""``tuning``, ``random``, ``untuned`` (``benchmarks/beats.py``), ``live`` (``live_songs``) and
-``heldout`` (``heldout_songs``)."""
+REAL_SETS = {"real": "heldout", "real-tuning": "tuning"}
+"""The real-music sets and the split of ``benchmarks/real_music`` each one is."""
+
+LIVE_SETS = (*BEAT_SETS, *LIVE_CASE_SETS, *REAL_SETS)
+"""``tuning``, ``random``, ``untuned`` (``benchmarks/beats.py``), ``live`` (``live_songs``),
+``heldout`` (``heldout_songs``), ``real`` and ``real-tuning`` (`real_songs`)."""
 
 DEFAULT_SETS = ("random", "untuned", "live", "heldout")
 """The sets reported by default: all but ``tuning``."""
@@ -334,6 +342,39 @@ def live_case_songs(
     return songs + (heldout_songs(sr, cache_dir) if "heldout" in sets else [])
 
 
+def real_songs(sets: tuple[str, ...], sr: int) -> list[LiveSong]:
+    """The real-music songs of the ``REAL_SETS`` among ``sets``, at ``sr``."""
+    from benchmarks.real_music import load_audio_at, load_songs
+
+    songs = []
+    for set_name, split in REAL_SETS.items():
+        if set_name in sets:
+            songs += [
+                LiveSong(s.name, set_name, load_audio_at(s, sr), s.beats_s, s.downbeats_s)
+                for s in load_songs(splits=(split,))
+            ]
+    return songs
+
+
+def madmom_online_tracks(python: str | Path, songs: list[LiveSong]) -> dict[str, np.ndarray]:
+    """madmom's online beats of each real-music song (``REAL_SETS``): {name: (n,) s}. madmom
+    hears the recording decoded at its models' rate, not our tracker's."""
+    import tempfile
+
+    import soundfile as sf
+
+    from benchmarks.beats import MADMOM_SR, madmom_tracks
+    from benchmarks.real_music import load_audio_at, load_songs
+
+    by_name = {s.name: s for s in load_songs()}
+    with tempfile.TemporaryDirectory(prefix="quaddance-madmom-") as tmp:
+        paths = {song.name: Path(tmp) / f"{song.name}.wav" for song in songs}
+        for name, path in paths.items():
+            sf.write(str(path), load_audio_at(by_name[name], MADMOM_SR), MADMOM_SR)
+        tracks = madmom_tracks(python, list(paths.values()), ("online",))
+    return {name: tracks[str(path)]["online"] for name, path in paths.items()}
+
+
 def beat_songs(sets: tuple[str, ...], sr: int, n_random: int, cache_dir: Path) -> list[LiveSong]:
     """The beat benchmark's songs of ``sets`` (`bench_songs`) as `LiveSong`s."""
     songs = bench_songs(sets, sr=sr, n_random=n_random, cache_dir=cache_dir)
@@ -578,6 +619,7 @@ def bench_live_tracker(
     cache_dir: Path = Path("benchmarks/cache"),
     progress: Callable[[str], None] | None = None,
     shifts: int = 1,
+    madmom_python: str | Path | None = None,
 ) -> dict[str, Any]:
     """Score the online tracker and the offline analyser on ``sets``; write nothing.
 
@@ -588,6 +630,8 @@ def bench_live_tracker(
         progress: called with each song's name before it is scored.
         shifts: also score the online tracker at this many offsets within an onset frame
             (`shifted_scores`), with the goals averaged over them (``goals["shifted"]``).
+        madmom_python: an interpreter that imports madmom: its online tracker is scored on
+            the real-music songs too (``f_madmom_online``, ``f_madmom_online_whole_song``).
 
     Returns:
         ``{"songs": [per-song rows], "means": {set: ...}, "goals": {...}, ...}``; a row has
@@ -610,11 +654,26 @@ def bench_live_tracker(
     if "tuning" in sets:
         songs += live_tuning_songs(SR_HZ, cache_dir)
     songs += live_case_songs(sets, SR_HZ, cache_dir)
+    real = real_songs(sets, SR_HZ)
+    songs += real
+    madmom: dict[str, np.ndarray] = {}
+    if madmom_python is not None and real:
+        if progress is not None:
+            progress("madmom's online tracker")
+        madmom = madmom_online_tracks(madmom_python, real)
     rows = []
     for song in songs:
         if progress is not None:
             progress(song.name)
-        rows.append(_score_song(song, SR_HZ, shifts))
+        row = _score_song(song, SR_HZ, shifts)
+        if song.name in madmom:
+            # Scored on the span ours is (after our lock), and over the whole song.
+            start_s = row["lock_s"] if row["lock_s"] is not None else row["duration_s"]
+            row["f_madmom_online"] = round(f_after(song.beats_s, madmom[song.name], start_s), 4)
+            row["f_madmom_online_whole_song"] = round(
+                f_after(song.beats_s, madmom[song.name], 0.0), 4
+            )
+        rows.append(row)
     means: dict[str, dict[str, Any]] = {}
     for set_name in sets:
         in_set = [r for r in rows if r["set"] == set_name]
@@ -639,6 +698,9 @@ def bench_live_tracker(
             "silence_f_online": round(float(np.mean([r["silence_f_online"] for r in in_set])), 4),
             "noisy_f_online": round(float(np.mean([r["noisy_f_online"] for r in in_set])), 4),
         }
+        for key in ("f_online_whole_song", "f_madmom_online", "f_madmom_online_whole_song"):
+            if all(key in r for r in in_set):
+                means[set_name][key] = round(float(np.mean([r[key] for r in in_set])), 4)
 
     def in_time(key: str) -> str:
         return f"{sum(_in_time(r[key]) for r in rows)}/{len(rows)}"

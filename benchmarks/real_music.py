@@ -576,13 +576,15 @@ def _downbeat_f(song: RealSong, est_s: np.ndarray, start_s: float = 0.0) -> floa
     return round(beat_f_measure(ref, est_s[est_s >= start_s]), 4)
 
 
-def score_song(song: RealSong, madmom_s: np.ndarray | None = None) -> dict[str, Any]:
+def score_song(song: RealSong, madmom: dict[str, np.ndarray] | None = None) -> dict[str, Any]:
     """Strict and metrical-level F (+-70 ms) of each tracker on ``song``, and more.
 
     Offline: ``analyze`` (what ``quaddance analyze`` runs) and librosa's ``beat_track`` over
     the whole song. Online: the ``OnlineBeatTracker`` fed the file block by block at full
     speed (`track_file`, decoded as ``live --from-file`` decodes it); ``lock_s`` is its first
     lock, ``f*_online`` are scored after it and ``f_metrical_online_whole`` over the song.
+    ``madmom`` holds madmom's tracks (`benchmarks.beats.madmom_tracks`): its online beats are
+    scored over the same span as ours (after our lock) and over the whole song.
     """
     from benchmarks.beats import metrical_level_f_measure
     from quaddance.music.analysis import analyze
@@ -619,15 +621,20 @@ def score_song(song: RealSong, madmom_s: np.ndarray | None = None) -> dict[str, 
         "online_cpu_per_audio_s": round(online.tracker_s / song.duration_s, 4),
         "offline_cpu_s": round(t1 - t0, 2),
     }  # fmt: skip
-    if madmom_s is not None:
-        row.update(_scores("madmom_dbn", ref, madmom_s))
+    if madmom is not None:
+        row.update(_scores("madmom_dbn", ref, madmom["dbn"]))
+        mm_online = madmom["online"]
+        row.update(_scores("madmom_online", ref[ref >= after], mm_online[mm_online >= after]))
+        row["f_metrical_madmom_online_whole"] = round(metrical_level_f_measure(ref, mm_online), 4)
+        row["f_downbeat_madmom"] = _downbeat_f(song, madmom["downbeats"])
     return row
 
 
 MEAN_KEYS = (
     "f_offline", "f_metrical_offline", "f_downbeat_offline", "f_librosa", "f_metrical_librosa",
     "f_online", "f_metrical_online", "f_metrical_online_whole", "f_downbeat_online",
-    "f_madmom_dbn", "f_metrical_madmom_dbn",
+    "f_madmom_dbn", "f_metrical_madmom_dbn", "f_madmom_online", "f_metrical_madmom_online",
+    "f_metrical_madmom_online_whole", "f_downbeat_madmom",
 )  # fmt: skip
 
 
@@ -639,7 +646,7 @@ def _means(rows: list[dict[str, Any]]) -> dict[str, Any]:
     for key in MEAN_KEYS:
         if rows and all(key in r for r in rows):
             out[key] = round(float(np.mean([r[key] for r in rows])), 4)
-    for tracker in ("offline", "online", "librosa", "madmom_dbn"):
+    for tracker in ("offline", "online", "librosa", "madmom_dbn", "madmom_online"):
         if rows and all(f"tempo_ok_{tracker}" in r for r in rows):
             out[f"tempo_ok_{tracker}"] = sum(r[f"tempo_ok_{tracker}"] for r in rows)
     locks = [r["lock_s"] for r in rows if r["lock_s"] is not None]
@@ -647,6 +654,25 @@ def _means(rows: list[dict[str, Any]]) -> dict[str, Any]:
     out["locked_within_6s"] = sum(1 for s in locks if s <= 6.0)
     out["lock_s_median"] = round(float(np.median(locks)), 2) if locks else None
     return out
+
+
+def _madmom_tracks(python: str, songs: list[RealSong]) -> dict[str, dict[str, np.ndarray]]:
+    """madmom's offline, online and downbeat tracks of each song: {name: {tracker: times}}.
+
+    madmom reads the songs as wav files at its models' rate (it decodes Ogg only through an
+    ffmpeg binary on PATH, which a machine may lack).
+    """
+    import soundfile as sf
+
+    from benchmarks.beats import MADMOM_SR, MADMOM_TRACKERS, madmom_tracks
+
+    with tempfile.TemporaryDirectory(prefix="quaddance-madmom-") as tmp:
+        paths = {}
+        for song in songs:
+            paths[song.name] = Path(tmp) / f"{song.name}.wav"
+            sf.write(str(paths[song.name]), load_audio_at(song, MADMOM_SR), MADMOM_SR)
+        by_path = madmom_tracks(python, list(paths.values()), MADMOM_TRACKERS)
+    return {name: by_path[str(path)] for name, path in paths.items()}
 
 
 def run_real_bench(
@@ -659,12 +685,11 @@ def run_real_bench(
     from quaddance.fileio import write_json
 
     songs = load_songs(root)
-    madmom: dict[str, np.ndarray] = {}
+    madmom: dict[str, dict[str, np.ndarray]] = {}
     if madmom_python is not None:
-        from benchmarks.beats import madmom_beats_s
-
-        by_path = madmom_beats_s(madmom_python, [s.audio_path for s in songs])
-        madmom = {s.name: by_path[str(s.audio_path)] for s in songs}
+        if progress is not None:
+            progress("madmom (offline, online, downbeats)")
+        madmom = _madmom_tracks(madmom_python, songs)
     rows = []
     for song in songs:
         if progress is not None:

@@ -1,0 +1,113 @@
+"""The beat benchmarks' madmom runner, with a stand-in madmom package (madmom itself lives in
+its own environment, which CI does not build): the processors each tracker asks for, the
+downbeats it keeps, the errors, and ``bench live --sets real``'s songs."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from benchmarks.beats import MADMOM_TRACKERS, madmom_beats_s, madmom_tracks
+from benchmarks.live import LIVE_SETS, REAL_SETS, real_songs
+from quaddance.errors import QuaddanceError
+
+# The stand-in answers with times that say which processors, in which mode, made them.
+_BEATS = """
+import numpy as np
+class RNNBeatProcessor:
+    def __init__(self, online=False):
+        self.online = online
+    def __call__(self, path):
+        return np.full(10, 0.5 if self.online else 0.25)
+class DBNBeatTrackingProcessor:
+    def __init__(self, fps, online=False):
+        assert fps == 100
+        self.online = online
+    def __call__(self, act):
+        return np.array([act[0], 1.0 + act[0]]) + (10.0 if self.online else 0.0)
+"""
+_DOWNBEATS = """
+import numpy as np
+class RNNDownBeatProcessor:
+    def __call__(self, path):
+        return np.zeros((10, 2))
+class DBNDownBeatTrackingProcessor:
+    def __init__(self, beats_per_bar, fps):
+        assert list(beats_per_bar) == [3, 4] and fps == 100
+    def __call__(self, act):
+        return np.array([[0.5, 1], [1.0, 2], [1.5, 3], [2.0, 1], [2.5, 2]])
+"""
+
+
+@pytest.fixture
+def fake_madmom(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    pkg = tmp_path / "site" / "madmom"
+    (pkg / "features").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "features" / "__init__.py").write_text("")
+    (pkg / "features" / "beats.py").write_text(_BEATS)
+    (pkg / "features" / "downbeats.py").write_text(_DOWNBEATS)
+    monkeypatch.setenv("PYTHONPATH", str(tmp_path / "site"))
+    wav = tmp_path / "song.wav"
+    wav.write_bytes(b"")
+    return wav
+
+
+def test_each_tracker_runs_its_processors_in_its_mode(fake_madmom: Path) -> None:
+    tracks = madmom_tracks(sys.executable, [fake_madmom], MADMOM_TRACKERS)
+    row = tracks[str(fake_madmom)]
+    np.testing.assert_allclose(row["dbn"], [0.25, 1.25])  # offline RNN, offline DBN
+    np.testing.assert_allclose(row["online"], [10.5, 11.5])  # forward RNN, online DBN
+    np.testing.assert_allclose(row["downbeats"], [0.5, 2.0])  # the beats numbered 1
+    only_dbn = madmom_beats_s(sys.executable, [fake_madmom])
+    np.testing.assert_allclose(only_dbn[str(fake_madmom)], [0.25, 1.25])
+
+
+def test_unknown_tracker_and_broken_interpreter_are_one_line_errors(
+    fake_madmom: Path, tmp_path: Path
+) -> None:
+    with pytest.raises(QuaddanceError, match="unknown madmom tracker"):
+        madmom_tracks(sys.executable, [fake_madmom], ("dbn", "crf"))
+    with pytest.raises(QuaddanceError, match="cannot run madmom's interpreter"):
+        madmom_tracks(tmp_path / "no-python", [fake_madmom])
+    broken = tmp_path / "python"
+    broken.write_text("#!/bin/sh\necho 'No module named madmom' >&2\nexit 1\n")
+    broken.chmod(0o755)
+    with pytest.raises(QuaddanceError, match="No module named madmom"):
+        madmom_tracks(broken, [fake_madmom])
+
+
+def test_bench_beats_real_with_a_missing_interpreter_stops_at_once(tmp_path: Path) -> None:
+    from benchmarks.cli import app
+
+    result = CliRunner().invoke(
+        app,
+        ["beats", "--sets", "real", "--out", str(tmp_path / "b.json"),
+         "--madmom-python", str(tmp_path / "no-python")],
+    )  # fmt: skip
+    assert result.exit_code != 0
+    assert "cannot run madmom's interpreter" in str(result.exception)
+    assert not (tmp_path / "b_real.json").exists()
+
+
+def test_real_sets_are_the_real_music_splits(monkeypatch: pytest.MonkeyPatch) -> None:
+    import benchmarks.real_music as real_music
+    from benchmarks.real_music import load_songs
+
+    assert set(REAL_SETS) <= set(LIVE_SETS)
+    assert set(REAL_SETS.values()) == set(real_music.SPLITS)
+    # The audio is not decoded here: only which songs each set holds, and their beats.
+    monkeypatch.setattr(real_music, "load_audio_at", lambda song, sr: np.zeros(sr))
+    songs = real_songs(("real", "random"), 11025)
+    heldout = load_songs(splits=("heldout",))
+    assert [s.name for s in songs] == [s.name for s in heldout]
+    assert {s.set for s in songs} == {"real"}
+    np.testing.assert_array_equal(songs[0].beats_s, heldout[0].beats_s)
+    np.testing.assert_array_equal(songs[0].downbeats_s, heldout[0].downbeats_s)
+    assert [s.name for s in real_songs(("real-tuning",), 11025)] == [
+        s.name for s in load_songs(splits=("tuning",))
+    ]
