@@ -23,7 +23,12 @@ from quaddance.children import HelperProcess
 from quaddance.deploy.dds import cyclonedds_config
 from quaddance.deploy.go2_backend import SERVO_MODE, fill_low_cmd, reading_from_low_state
 from quaddance.deploy.go2_sim import fill_low_state, joint_command_from_low_cmd
-from quaddance.deploy.go2_wire import decode_low_cmd, seal_low_cmd, seal_low_state
+from quaddance.deploy.go2_wire import (
+    decode_low_cmd,
+    decode_low_state,
+    seal_low_cmd,
+    seal_low_state,
+)
 from quaddance.deploy.remote import DAMP_KEYS, KEY_A
 from quaddance.deploy.robot import JointCommand
 from quaddance.deploy.simulator import SensorState
@@ -101,7 +106,7 @@ def test_the_joint_map_round_trips(robot):
     state = _state()
     low = unitree_go_msg_dds__LowState_()
     fill_low_state(low, state, robot)
-    reading = reading_from_low_state(low, robot)
+    reading = reading_from_low_state(decode_low_state(seal_low_state(low)), robot)
     np.testing.assert_allclose(reading.joint_pos_rad, state.joint_pos_rad, 0, 1e-6)
     np.testing.assert_allclose(reading.joint_vel_rad_s, state.joint_vel_rad_s, 0, 1e-6)
     np.testing.assert_array_equal(reading.foot_force_n, np.rint(state.foot_force_n))
@@ -168,6 +173,23 @@ def test_messages_serialize_to_cyclonedds_bytes_with_the_sdks_crc(seed):
     assert not decode_low_cmd(bytes(corrupt)).crc_ok
     assert decode_low_cmd(wire[:-4]) is None  # too short
     assert decode_low_cmd(b"\x00\x00" + wire[2:]) is None  # big-endian: not what a Go2 sends
+
+    low = unitree_go_msg_dds__LowState_()
+    _fill_random(low, rng)
+    wire = seal_low_state(low)
+    state = decode_low_state(wire)
+    assert state is not None and state.crc_ok
+    assert state.tick == low.tick and state.soc == low.bms_state.soc
+    np.testing.assert_array_equal(state.quat_wxyz, low.imu_state.quaternion)
+    np.testing.assert_array_equal(state.gyro_rad_s, low.imu_state.gyroscope)
+    np.testing.assert_array_equal(state.q, [m.q for m in low.motor_state])
+    np.testing.assert_array_equal(state.dq, [m.dq for m in low.motor_state])
+    np.testing.assert_array_equal(state.foot_force, low.foot_force)
+    assert state.wireless_remote == bytes(low.wireless_remote)
+    corrupt = bytearray(wire)
+    corrupt[200] ^= 1
+    assert not decode_low_state(bytes(corrupt)).crc_ok
+    assert decode_low_state(wire[:-4]) is None
 
 
 def test_dds_stays_on_loopback_and_names_the_robots_interface():

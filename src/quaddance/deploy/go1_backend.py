@@ -7,6 +7,9 @@ The SDK expects a command every 2 ms, so a 500 Hz thread exchanges LowCmd / LowS
 robot and passes every command through the SDK's own guards (``Safety.PositionLimit`` and
 ``Safety.PowerProtect`` at the chosen level) before sending; the 50 Hz runner only swaps the
 command that thread sends. Our safety layer (`quaddance.deploy.safety`) runs before that.
+That thread keeps its Python work small, for it runs above the runner and holds the GIL while
+it works: it keeps the newest state as the SDK's object (decoded when `read` asks, at 50 Hz)
+and fills the LowCmd once per runner command (or after PowerProtect idled its motors).
 
 The map from the SDK's motor and foot order to quaddance's (model joint order, task foot
 order) and the joint signs are the robot's (`RobotCfg.sdk_joint_index`, `sdk_joint_sign`,
@@ -102,6 +105,10 @@ class Go1Robot(Robot):
         self._sdk: ModuleType | None = None
         self._lock = threading.Lock()
         self._cmd: JointCommand | None = None
+        # The SDK's newest LowState, from the exchange thread: a new object for each state,
+        # never written after it is handed over.
+        self._low_state = None
+        self._decoded = None  # the LowState that `_latest` was decoded from
         self._latest: Reading | None = None
         self._running = False
         self._thread: threading.Thread | None = None
@@ -112,7 +119,7 @@ class Go1Robot(Robot):
         self._udp = sdk.UDP(LOWLEVEL, self.local_port, self.robot_ip, self.robot_port)
         self._safe = sdk.Safety(sdk.LeggedType.Go1)
         self._low_cmd = sdk.LowCmd()
-        self._low_state = sdk.LowState()
+        self._low_state = None
         self._udp.InitCmdData(self._low_cmd)
         self._running = True
         self._thread = threading.Thread(target=self._loop, name="go1-lowlevel", daemon=True)
@@ -135,21 +142,28 @@ class Go1Robot(Robot):
 
     def _exchange(self) -> None:
         # Until the runner's first command: idle motors (mode 0, no torque), as the SDK starts.
+        assert self._sdk is not None
         next_t = time.monotonic()
+        packed: JointCommand | None = None  # the command in self._low_cmd
         while self._running:
             self._udp.Recv()
-            self._udp.GetRecv(self._low_state)
-            reading = reading_from_low_state(self._low_state, self.robot_cfg)
+            state = self._sdk.LowState()
+            self._udp.GetRecv(state)
             with self._lock:
-                self._latest = reading
+                self._low_state = state
                 cmd = self._cmd
             if cmd is not None:
-                fill_low_cmd(self._low_cmd, cmd, self.robot_cfg)
-                self._safe.PositionLimit(self._low_cmd)
+                if cmd is not packed:
+                    fill_low_cmd(self._low_cmd, cmd, self.robot_cfg)
+                    # Clamping a clamped command changes nothing: once per command is enough.
+                    self._safe.PositionLimit(self._low_cmd)
+                    packed = cmd
                 # 1: within the limit; -1: over it for several ticks, and the SDK has set
-                # every motor idle (mode 0x00) and printed an error.
-                if self._safe.PowerProtect(self._low_cmd, self._low_state, self.power_level) < 0:
+                # every motor idle (mode 0x00) and printed an error: for this send only, as
+                # when the command is filled every loop.
+                if self._safe.PowerProtect(self._low_cmd, state, self.power_level) < 0:
                     self.power_protect_trips += 1
+                    packed = None
             self._udp.SetSend(self._low_cmd)
             self._udp.Send()
             next_t += LOOP_S
@@ -161,7 +175,13 @@ class Go1Robot(Robot):
 
     def read(self) -> Reading | None:
         with self._lock:
-            return self._latest
+            state = self._low_state
+        if state is None:
+            return None
+        if state is not self._decoded:  # a new state since the last read
+            self._latest = reading_from_low_state(state, self.robot_cfg)
+            self._decoded = state
+        return self._latest
 
     def send(self, cmd: JointCommand) -> None:
         with self._lock:

@@ -21,10 +21,8 @@ import threading
 import time
 from typing import Any
 
-import numpy as np
-
-from quaddance.deploy.dds import init_dds, load_sdk2, polled_reader
-from quaddance.deploy.go2_wire import seal_low_cmd
+from quaddance.deploy.dds import init_dds, load_sdk2, polled_reader, take_serialized
+from quaddance.deploy.go2_wire import LowStateFields, decode_low_state, seal_low_cmd
 from quaddance.deploy.remote import decode_remote
 from quaddance.deploy.robot import JointCommand, Reading, Robot, realtime_priority
 from quaddance.errors import QuaddanceError
@@ -68,21 +66,21 @@ def freeze_serialized(msg: Any, wire: bytes) -> None:
     msg.serialize = lambda **_: wire
 
 
-def reading_from_low_state(state: Any, robot: RobotCfg) -> Reading:
-    """An SDK ``LowState_`` as a `Reading` (model joint order, task foot order).
+def reading_from_low_state(state: LowStateFields, robot: RobotCfg) -> Reading:
+    """A ``LowState_`` (`decode_low_state`) as a `Reading` (model joint order, task foot
+    order).
 
     ``seq`` is the state's ``tick`` (the robot's milliseconds), new with every state.
     """
-    motors = state.motor_state[: robot.num_joints]
     return Reading(
-        seq=int(state.tick),
-        stamp_s=int(state.tick) / 1000.0,
-        quat_wxyz=np.asarray(state.imu_state.quaternion, dtype=np.float64),  # w, x, y, z
-        gyro_rad_s=np.asarray(state.imu_state.gyroscope, dtype=np.float64),
-        joint_pos_rad=robot.from_sdk([m.q for m in motors]),
-        joint_vel_rad_s=robot.from_sdk([m.dq for m in motors]),
+        seq=state.tick,
+        stamp_s=state.tick / 1000.0,
+        quat_wxyz=state.quat_wxyz,  # w, x, y, z
+        gyro_rad_s=state.gyro_rad_s,
+        joint_pos_rad=robot.from_sdk(state.q[: robot.num_joints]),
+        joint_vel_rad_s=robot.from_sdk(state.dq[: robot.num_joints]),
         foot_force_n=robot.feet_from_sdk(state.foot_force),  # the sensors' raw units
-        battery_pct=float(state.bms_state.soc),
+        battery_pct=float(state.soc),
         remote_keys=decode_remote(state.wireless_remote),
     )
 
@@ -100,7 +98,6 @@ class Go2Robot(Robot):
         self.release_timeout_s = release_timeout_s
         self._lock = threading.Lock()
         self._reader: Any = None  # rt/lowstate
-        self._state_type: type = object
         self._latest: Reading | None = None
         self._cmd: JointCommand | None = None
         self._stop = threading.Event()  # ends the 500 Hz thread, and wakes it at once
@@ -116,9 +113,8 @@ class Go2Robot(Robot):
 
         self._release_sport_mode()
         # Only the newest state, taken when `read` asks: the 500 Hz states are decoded at the
-        # runner's 50 Hz only.
+        # runner's 50 Hz only, from their bytes (`decode_low_state`).
         self._reader = polled_reader(LOW_STATE_TOPIC, LowState_, depth=1)
-        self._state_type = LowState_
         self._pub = ChannelPublisher(LOW_CMD_TOPIC, LowCmd_)
         self._pub.Init()  # a writer, matched now; it writes from the first command on
         end = time.monotonic() + timeout_s
@@ -159,8 +155,9 @@ class Go2Robot(Robot):
 
     def read(self) -> Reading | None:
         if self._reader is not None:
-            for state in self._reader.take(N=1):
-                if isinstance(state, self._state_type):  # not a disposal notice
+            for data in take_serialized(self._reader, 1):
+                state = decode_low_state(data)
+                if state is not None:
                     self._latest = reading_from_low_state(state, self.robot_cfg)
         return self._latest
 

@@ -68,10 +68,26 @@ def _layout(groups: Sequence[tuple[str, ...]], c_struct: bool) -> struct.Struct:
     return struct.Struct(fmt)
 
 
+def _group_starts(groups: Sequence[tuple[str, ...]]) -> list[int]:
+    """The index of each group's first value in the unpacked tuple."""
+    starts, n = [], 0
+    for group in groups:
+        starts.append(n)
+        n += sum(int(f[:-1] or 1) for f in group)
+    return starts
+
+
 LOW_CMD_CDR, LOW_CMD_C = _layout(_LOW_CMD, False), _layout(_LOW_CMD, True)
 LOW_STATE_CDR, LOW_STATE_C = _layout(_LOW_STATE, False), _layout(_LOW_STATE, True)
 _MOTORS_AT = 9  #: values before the first motor (head .. bandwidth)
 _MOTOR_CMD_VALUES = 9  #: values per motor command
+_STATE_AT = _group_starts(_LOW_STATE)
+_IMU_AT = _STATE_AT[len(_HEADER)]
+_STATE_MOTORS_AT = _STATE_AT[len(_HEADER) + 1]
+_MOTOR_STATE_VALUES = _STATE_AT[len(_HEADER) + 2] - _STATE_MOTORS_AT
+_BMS_AT = _STATE_AT[len(_HEADER) + 1 + NUM_MOTOR_SLOTS]
+_FOOT_FORCE_AT = _STATE_AT[len(_HEADER) + 2 + NUM_MOTOR_SLOTS]
+_TICK_AT = _FOOT_FORCE_AT + 8  #: after foot_force[4] and foot_force_est[4]
 
 
 def _sealed(values: list, cdr: struct.Struct, c_struct: struct.Struct) -> tuple[int, bytes]:
@@ -135,3 +151,41 @@ def decode_low_cmd(data: bytes) -> LowCmdMotors | None:
     mode, q, dq, tau, kp, kd = motors[:, :6].T
     crc_ok = values[-1] == crc32(LOW_CMD_C.pack(*values))
     return LowCmdMotors(crc_ok, mode, q, dq, tau, kp, kd)
+
+
+@dataclass
+class LowStateFields:
+    """What a controller reads of a serialized ``LowState_`` (SDK motor and foot order)."""
+
+    crc_ok: bool  #: its CRC field is the SDK's CRC of the rest
+    tick: int  #: the robot's clock, ms
+    quat_wxyz: np.ndarray  #: (4,) IMU orientation
+    gyro_rad_s: np.ndarray  #: (3,)
+    q: np.ndarray  #: (20,) rad
+    dq: np.ndarray  #: (20,) rad/s
+    foot_force: np.ndarray  #: (4,) the sensors' raw units
+    soc: int  #: battery state of charge, %
+    wireless_remote: bytes  #: (40,) the remote's raw bytes
+
+
+def decode_low_state(data: bytes) -> LowStateFields | None:
+    """A ``LowState_`` from its serialized bytes, as a reader takes them (with the
+    encapsulation header): ~20 us with struct, where cyclonedds-python's deserializing takes
+    ~0.3 ms. None if they are not one in XCDR1, little-endian."""
+    if data[:2] != XCDR1_LE or len(data) < 4 + LOW_STATE_CDR.size:
+        return None
+    values = LOW_STATE_CDR.unpack_from(data, 4)
+    end = _STATE_MOTORS_AT + NUM_MOTOR_SLOTS * _MOTOR_STATE_VALUES
+    motors = np.array(values[_STATE_MOTORS_AT:end], dtype=np.float64)
+    motors = motors.reshape(NUM_MOTOR_SLOTS, _MOTOR_STATE_VALUES)
+    return LowStateFields(
+        crc_ok=values[-1] == crc32(LOW_STATE_C.pack(*values)),
+        tick=int(values[_TICK_AT]),
+        quat_wxyz=np.array(values[_IMU_AT : _IMU_AT + 4], dtype=np.float64),
+        gyro_rad_s=np.array(values[_IMU_AT + 4 : _IMU_AT + 7], dtype=np.float64),
+        q=motors[:, 1].copy(),
+        dq=motors[:, 2].copy(),
+        foot_force=np.array(values[_FOOT_FORCE_AT : _FOOT_FORCE_AT + 4], dtype=np.float64),
+        soc=int(values[_BMS_AT + 3]),
+        wireless_remote=bytes(values[_TICK_AT + 1 : _TICK_AT + 41]),
+    )
