@@ -15,6 +15,19 @@ from quaddance.cli.options import PolicyOpt, PolicyRobotOpt, RobotModelOpt, fini
 
 app = typer.Typer(no_args_is_help=True, help="Benchmarks; each writes a JSON file of results.")
 
+MadmomPython = Annotated[
+    Path | None,
+    typer.Option(
+        help="A Python interpreter that can import madmom: also score madmom's trackers (bench "
+        "live: its online tracker on the real-music sets). madmom is not a dependency; the "
+        "default is the environment scripts/install_madmom.sh builds (.madmom/venv), when "
+        "it is there."
+    ),
+]
+NoMadmom = Annotated[
+    bool, typer.Option("--no-madmom", help="Leave madmom out even where it is installed.")
+]
+
 
 @app.command("live")
 def bench_live_cmd(
@@ -50,17 +63,8 @@ def bench_live_cmd(
             max=16,
         ),
     ] = 1,
-    madmom_python: Annotated[
-        Path | None,
-        typer.Option(
-            help="A Python interpreter that can import madmom: also score madmom's online "
-            "tracker on the real-music sets. Default: scripts/install_madmom.sh's environment "
-            "(.madmom/venv), when it is there."
-        ),
-    ] = None,
-    no_madmom: Annotated[
-        bool, typer.Option("--no-madmom", help="Leave madmom out even where it is installed.")
-    ] = False,
+    madmom_python: MadmomPython = None,
+    no_madmom: NoMadmom = False,
 ) -> None:
     """Online beat tracking vs the offline analyser (lock time, F-measure) on songs with exact
     beats not tuned on, heard from their start and joined mid-song (also: after a quiet room,
@@ -170,17 +174,8 @@ def bench_beats_cmd(
             "go to OUT with _real added to the name)."
         ),
     ] = "tuning,random,untuned",
-    madmom_python: Annotated[
-        Path | None,
-        typer.Option(
-            help="A Python interpreter that can import madmom: also score madmom's trackers "
-            "(madmom is not a dependency). Default: the environment that "
-            "scripts/install_madmom.sh builds (.madmom/venv), when it is there."
-        ),
-    ] = None,
-    no_madmom: Annotated[
-        bool, typer.Option("--no-madmom", help="Leave madmom out even where it is installed.")
-    ] = False,
+    madmom_python: MadmomPython = None,
+    no_madmom: NoMadmom = False,
 ) -> None:
     """Beat F-measure of our analyser, librosa's default (and madmom's) on songs with exact beats.
 

@@ -111,3 +111,37 @@ def test_real_sets_are_the_real_music_splits(monkeypatch: pytest.MonkeyPatch) ->
     assert [s.name for s in real_songs(("real-tuning",), 11025)] == [
         s.name for s in load_songs(splits=("tuning",))
     ]
+
+
+def test_bench_beats_real_picks_madmom_by_its_options(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import benchmarks.beats as beats
+    import benchmarks.real_music as real_music
+    from benchmarks.cli import app
+
+    asked: list[str | None] = []
+
+    def fake_bench(out, madmom_python=None, progress=None):
+        asked.append(madmom_python)
+        return {"songs": [], "means": {}}
+
+    monkeypatch.setattr(real_music, "run_real_bench", fake_bench)
+    installed = tmp_path / "venv"
+    (installed / "bin").mkdir(parents=True)
+    (installed / "bin" / "python").write_text("")
+    out = ["--out", str(tmp_path / "b.json")]
+    monkeypatch.setattr(beats, "MADMOM_VENV", tmp_path / "not-built")
+    runs = (
+        [],  # not installed: left out
+        ["--madmom-python", "/opt/mm/python"],
+        ["--madmom-python", "/opt/mm/python", "--no-madmom"],
+    )
+    for extra in runs:
+        result = CliRunner().invoke(app, ["beats", "--sets", "real", *out, *extra])
+        assert result.exit_code == 0, result.output
+    monkeypatch.setattr(beats, "MADMOM_VENV", installed)
+    for extra in ([], ["--no-madmom"]):
+        result = CliRunner().invoke(app, ["beats", "--sets", "real", *out, *extra])
+        assert result.exit_code == 0, result.output
+    assert asked == [None, "/opt/mm/python", None, str(installed / "bin" / "python"), None]
