@@ -176,6 +176,10 @@ def bench_beats_cmd(
     ] = "tuning,random,untuned",
     madmom_python: MadmomPython = None,
     no_madmom: NoMadmom = False,
+    report: Annotated[
+        Path | None,
+        typer.Option(help="With the real set: also write its markdown report here."),
+    ] = None,
 ) -> None:
     """Beat F-measure of our analyser, librosa's default (and madmom's) on songs with exact beats.
 
@@ -195,7 +199,7 @@ def bench_beats_cmd(
     madmom_python = _madmom_python(madmom_python, no_madmom, console)
     chosen = tuple(s.strip() for s in sets.split(",") if s.strip())
     if "real" in chosen:
-        _bench_real_beats(out, madmom_python, console)
+        _bench_real_beats(out, madmom_python, console, report)
         chosen = tuple(s for s in chosen if s != "real")
         if not chosen:
             return
@@ -226,12 +230,16 @@ def bench_beats_cmd(
     print(f"-> {out}")
 
 
-def _bench_real_beats(out: Path, madmom_python: Path | None, console: Any) -> None:
-    """``bench beats --sets real``: the real-music set, offline, online and librosa."""
+def _bench_real_beats(
+    out: Path, madmom_python: Path | None, console: Any, report: Path | None
+) -> None:
+    """``bench beats --sets real``: the real-music set, offline, online and librosa (and
+    madmom); the markdown report to ``report``."""
     from rich.console import Console
     from rich.table import Table
 
-    from benchmarks.real_music import run_real_bench
+    from benchmarks.real_music import report_md, run_real_bench
+    from quaddance.fileio import atomic_path
 
     real_out = out.with_name(f"{out.stem}_real{out.suffix}")
     with console.status("Scoring beats on real music...") as status:
@@ -259,6 +267,10 @@ def _bench_real_beats(out: Path, madmom_python: Path | None, console: Any) -> No
         table.add_row(f"mean ({mean['n_songs']} songs)", part, "", "", *cells, "")
     Console().print(table)
     print(f"-> {real_out}")
+    if report is not None:
+        with atomic_path(report) as tmp:
+            tmp.write_text(report_md(results))
+        print(f"-> {report}")
 
 
 @app.command("choreograph")

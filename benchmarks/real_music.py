@@ -26,9 +26,10 @@ Commands (run from the repository root):
 - ``python -m benchmarks.real_music check`` measures how well the beats sit on the audio's
   onsets (`check_song`) and writes ``benchmarks/results/real_music_check.json``.
 - ``quaddance bench beats --sets real`` (or ``python -m benchmarks.real_music bench``) scores
-  the offline analyser, the online tracker and librosa's ``beat_track`` (and madmom's DBN
-  tracker with ``--madmom-python``) on both splits and writes
-  ``benchmarks/results/beats_real.json``.
+  the offline analyser, the online tracker and librosa's ``beat_track`` (and madmom's offline,
+  online and downbeat trackers, where ``scripts/install_madmom.sh`` has built madmom) on both
+  splits and writes ``benchmarks/results/beats_real.json``; ``--report`` also writes the
+  markdown report (`report_md`, ``docs/results/beats_real.md``).
 
 The split (``real_music/sources.toml``) was fixed before any tracker was run on these songs: the
 ``tuning`` part may be used to choose settings, the ``heldout`` part only to report them.
@@ -682,6 +683,7 @@ def run_real_bench(
     progress: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
     """Score the trackers on both splits; write and return the results."""
+    from benchmarks.live import machine_info
     from quaddance.fileio import write_json
 
     songs = load_songs(root)
@@ -704,6 +706,7 @@ def run_real_bench(
             "scores count the beats after the first lock (lock_s); downbeat F strict"
         ),
         "command": "quaddance bench beats --sets real",
+        "machine": machine_info(),
         "madmom_python": madmom_python,
         # Per split, and per split and kind: the recordings are the harder, truer test.
         "means": {
@@ -720,6 +723,100 @@ def run_real_bench(
     }
     write_json(out_path, results)
     return results
+
+
+#: The report's trackers: (key in the results, name in the report).
+REPORT_TRACKERS = (
+    ("offline", "quaddance offline (`analyze`)"),
+    ("online", "quaddance online (`live`), after its lock"),
+    ("madmom_dbn", "madmom offline (RNN + DBN)"),
+    ("madmom_online", "madmom online (forward RNN + online DBN), same span"),
+    ("librosa", "librosa `beat_track`"),
+)
+
+
+def _machine_text(machine: dict[str, Any] | None) -> str:
+    if not machine:
+        return "an unrecorded machine"
+    return f"{machine['cpu']}, {machine['cpu_count']} CPU cores"
+
+
+def _cell(mean: dict[str, Any], key: str, digits: int = 2) -> str:
+    value = mean.get(key)
+    return "-" if value is None else f"{value:.{digits}f}"
+
+
+def report_md(results: dict[str, Any]) -> str:
+    """The markdown report of `run_real_bench`'s results: per part (held-out first), each
+    tracker's beat F strict and at its metrical level, downbeat F, tempo within 4 %; lock
+    times; then every song."""
+    means = results["means"]
+    parts = [p for p in ("heldout", "heldout_recording", "heldout_midi_render", "tuning",
+                         "tuning_recording", "tuning_midi_render") if p in means]  # fmt: skip
+    lines = [
+        "# Beats on real music",
+        "",
+        f"Made by `{results['command']}` on {_machine_text(results.get('machine'))}: "
+        f"{results['set']}. Metric: {results['metric']}. madmom "
+        + (
+            "(0.16.1, its models CC BY-NC-SA: compared against, never shipped) "
+            "from `scripts/install_madmom.sh`'s environment."
+            if results.get("madmom_python")
+            else "was not installed for this run (`scripts/install_madmom.sh`)."
+        ),
+        "",
+        "The held-out part was fixed before any tracker ran on these songs "
+        "(`benchmarks/real_music/sources.toml`); the tuning part is listed last.",
+        "",
+    ]
+    for part in parts:
+        m = means[part]
+        lines += [
+            f"## {part.replace('_', ', ').replace('midi, render', 'MIDI renders')}"
+            f" ({m['n_songs']} songs, {m['minutes']} min)",
+            "",
+            "| tracker | F strict | F at its metrical level | downbeat F | tempo within 4 % "
+            "(or x2, x1/2) |",
+            "|---|---|---|---|---|",
+        ]
+        for key, name in REPORT_TRACKERS:
+            if f"f_{key}" not in m:
+                continue
+            downbeat = {"offline": "f_downbeat_offline", "online": "f_downbeat_online",
+                        "madmom_dbn": "f_downbeat_madmom"}.get(key)  # fmt: skip
+            tempo_ok = m.get(f"tempo_ok_{key}")
+            tempo = "-" if tempo_ok is None else f"{tempo_ok} of {m['n_songs']}"
+            lines.append(
+                f"| {name} | {_cell(m, f'f_{key}')} | {_cell(m, f'f_metrical_{key}')} | "
+                f"{_cell(m, downbeat) if downbeat else '-'} | {tempo} |"
+            )
+        lines += [
+            "",
+            f"Online lock: {m['n_locked']} of {m['n_songs']} songs, {m['locked_within_6s']} "
+            f"within 6 s, median {m['lock_s_median']} s.",
+            "",
+        ]
+    lines += [
+        "## Songs",
+        "",
+        "| song | split | kind | BPM | offline | online | madmom offline | madmom online | "
+        "librosa | lock s |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in results["songs"]:
+        bpm = r["true_tempo_bpm"]
+        bpm_text = f"{bpm:g}" if isinstance(bpm, float) else f"{bpm[0]:g}-{bpm[1]:g}"
+        cells = [
+            "-" if f"f_{k}" not in r else f"{r[f'f_{k}']:.2f} / {r[f'f_metrical_{k}']:.2f}"
+            for k in ("offline", "online", "madmom_dbn", "madmom_online", "librosa")
+        ]
+        lines.append(
+            f"| {r['name']} | {r['split']} | {r['kind']} | {bpm_text} | "
+            + " | ".join(cells)
+            + f" | {r['lock_s']} |"
+        )
+    lines += ["", "Each song cell: F strict / F at the tracker's metrical level.", ""]
+    return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> None:

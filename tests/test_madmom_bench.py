@@ -124,7 +124,7 @@ def test_bench_beats_real_picks_madmom_by_its_options(
 
     def fake_bench(out, madmom_python=None, progress=None):
         asked.append(madmom_python)
-        return {"songs": [], "means": {}}
+        return {"songs": [], "means": {}, "command": "c", "set": "s", "metric": "m"}
 
     monkeypatch.setattr(real_music, "run_real_bench", fake_bench)
     installed = tmp_path / "venv"
@@ -145,3 +145,32 @@ def test_bench_beats_real_picks_madmom_by_its_options(
         result = CliRunner().invoke(app, ["beats", "--sets", "real", *out, *extra])
         assert result.exit_code == 0, result.output
     assert asked == [None, "/opt/mm/python", None, str(installed / "bin" / "python"), None]
+    report = tmp_path / "beats_real.md"
+    result = CliRunner().invoke(app, ["beats", "--sets", "real", *out, "--report", str(report)])
+    assert result.exit_code == 0, result.output
+    assert report.read_text().startswith("# Beats on real music")
+
+
+def test_the_real_music_report_gives_each_tracker_per_part(tmp_path: Path) -> None:
+    from benchmarks.real_music import report_md
+
+    mean = {
+        "n_songs": 2, "minutes": 5.0, "f_offline": 0.71, "f_metrical_offline": 0.81,
+        "f_downbeat_offline": 0.4, "tempo_ok_offline": 2, "f_madmom_dbn": 0.77,
+        "f_metrical_madmom_dbn": 0.83, "f_downbeat_madmom": 0.55, "tempo_ok_madmom_dbn": 1,
+        "n_locked": 2, "locked_within_6s": 1, "lock_s_median": 5.5,
+    }  # fmt: skip
+    song = {"name": "a", "split": "heldout", "kind": "recording", "true_tempo_bpm": 120.0,
+            "f_offline": 0.7, "f_metrical_offline": 0.8, "lock_s": 4.2}  # fmt: skip
+    results = {
+        "command": "quaddance bench beats --sets real", "set": "S", "metric": "M",
+        "machine": {"cpu": "x86_64", "cpu_count": 2}, "madmom_python": "/mm/python",
+        "means": {"heldout": mean, "tuning": {**mean, "n_songs": 1}}, "songs": [song],
+    }  # fmt: skip
+    text = report_md(results)
+    assert text.index("## heldout") < text.index("## tuning")  # held-out first
+    assert "| quaddance offline (`analyze`) | 0.71 | 0.81 | 0.40 | 2 of 2 |" in text
+    assert "| madmom offline (RNN + DBN) | 0.77 | 0.83 | 0.55 | 1 of 2 |" in text
+    assert "librosa" not in text.split("## Songs")[0]  # not run: no row
+    assert "| a | heldout | recording | 120 | 0.70 / 0.80 | - | - | - | - | 4.2 |" in text
+    assert "x86_64, 2 CPU cores" in text and "CC BY-NC-SA" in text
