@@ -29,7 +29,8 @@ Commands (run from the repository root):
   the offline analyser, the online tracker and librosa's ``beat_track`` (and madmom's offline,
   online and downbeat trackers, where ``scripts/install_madmom.sh`` has built madmom) on both
   splits and writes ``benchmarks/results/beats_real.json``; ``--report`` also writes the
-  markdown report (`report_md`, ``docs/results/beats_real.md``).
+  markdown report (`report_md`, ``docs/results/beats_real.md``); ``python -m
+  benchmarks.real_music report`` writes it from a results file.
 
 The split (``real_music/sources.toml``) was fixed before any tracker was run on these songs: the
 ``tuning`` part may be used to choose settings, the ``heldout`` part only to report them.
@@ -737,7 +738,7 @@ REPORT_TRACKERS = (
 
 def _machine_text(machine: dict[str, Any] | None) -> str:
     if not machine:
-        return "an unrecorded machine"
+        return "a machine its results file does not record"
     return f"{machine['cpu']}, {machine['cpu_count']} CPU cores"
 
 
@@ -830,7 +831,17 @@ def main(argv: list[str] | None = None) -> None:
     r = sub.add_parser("bench", help="score the trackers on both splits")
     r.add_argument("--out", type=Path, default=Path("benchmarks/results/beats_real.json"))
     r.add_argument("--madmom-python", default=None, help="an interpreter that imports madmom")
+    m = sub.add_parser("report", help="the markdown report of a results file")
+    m.add_argument("--results", type=Path, default=Path("benchmarks/results/beats_real.json"))
+    m.add_argument("--out", type=Path, default=Path("docs/results/beats_real.md"))
     args = parser.parse_args(argv)
+    if args.command == "report":
+        from quaddance.fileio import atomic_path
+
+        with atomic_path(args.out) as tmp:
+            tmp.write_text(report_md(json.loads(args.results.read_text())))
+        print(f"-> {args.out}")
+        return
     if args.command == "build":
         debs = None
         if args.deb:
