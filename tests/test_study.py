@@ -144,6 +144,9 @@ def test_the_command_defaults_are_the_study_defaults():
         cfg.out,
     )
     assert cfg.report == Path("docs/results/study.md")
+    # Where the checkpoints go changes no result: the report's command leaves it out.
+    moved = study.StudyCfg(work=Path("/elsewhere/runs"))
+    assert moved.command() == cfg.command() == "quaddance study --budget 1250000 --seeds 2"
 
 
 def test_an_unknown_variant_fails_before_any_work(tmp_path):

@@ -181,13 +181,13 @@ class StudyCfg:
 
     def command(self) -> str:
         """The `quaddance study` command line of these settings (options left at their
-        defaults are left out, except the budget and the seeds)."""
+        defaults are left out, except the budget and the seeds; so is ``--work-dir``, where
+        checkpoints go, which changes no result)."""
         default = StudyCfg()
         opts = [f"--budget {self.budget_env_steps}", f"--seeds {self.seeds}"]
         opts += [f"--only {name}" for name in self.only]
         flags = (
             ("out", "--out"),
-            ("work", "--work-dir"),
             ("engine", "--engine"),
             ("num_envs", "--num-envs"),
             ("bank_size", "--bank-size"),
