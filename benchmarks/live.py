@@ -359,20 +359,12 @@ def real_songs(sets: tuple[str, ...], sr: int) -> list[LiveSong]:
 def madmom_online_tracks(python: str | Path, songs: list[LiveSong]) -> dict[str, np.ndarray]:
     """madmom's online beats of each real-music song (``REAL_SETS``): {name: (n,) s}. madmom
     hears the recording decoded at its models' rate, not our tracker's."""
-    import tempfile
+    from benchmarks.real_music import load_songs, madmom_song_tracks
 
-    import soundfile as sf
-
-    from benchmarks.beats import MADMOM_SR, madmom_tracks
-    from benchmarks.real_music import load_audio_at, load_songs
-
-    by_name = {s.name: s for s in load_songs()}
-    with tempfile.TemporaryDirectory(prefix="quaddance-madmom-") as tmp:
-        paths = {song.name: Path(tmp) / f"{song.name}.wav" for song in songs}
-        for name, path in paths.items():
-            sf.write(str(path), load_audio_at(by_name[name], MADMOM_SR), MADMOM_SR)
-        tracks = madmom_tracks(python, list(paths.values()), ("online",))
-    return {name: tracks[str(path)]["online"] for name, path in paths.items()}
+    names = {song.name for song in songs}
+    real = [s for s in load_songs() if s.name in names]
+    tracks = madmom_song_tracks(python, real, ("online",))
+    return {name: row["online"] for name, row in tracks.items()}
 
 
 def beat_songs(sets: tuple[str, ...], sr: int, n_random: int, cache_dir: Path) -> list[LiveSong]:

@@ -658,22 +658,25 @@ def _means(rows: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
-def _madmom_tracks(python: str, songs: list[RealSong]) -> dict[str, dict[str, np.ndarray]]:
-    """madmom's offline, online and downbeat tracks of each song: {name: {tracker: times}}.
+def madmom_song_tracks(
+    python: str | Path, songs: list[RealSong], trackers: tuple[str, ...]
+) -> dict[str, dict[str, np.ndarray]]:
+    """madmom's ``trackers`` (`benchmarks.beats.MADMOM_TRACKERS`) on each song: {name:
+    {tracker: times}}.
 
     madmom reads the songs as wav files at its models' rate (it decodes Ogg only through an
     ffmpeg binary on PATH, which a machine may lack).
     """
     import soundfile as sf
 
-    from benchmarks.beats import MADMOM_SR, MADMOM_TRACKERS, madmom_tracks
+    from benchmarks.beats import MADMOM_SR, madmom_tracks
 
     with tempfile.TemporaryDirectory(prefix="quaddance-madmom-") as tmp:
         paths = {}
         for song in songs:
             paths[song.name] = Path(tmp) / f"{song.name}.wav"
             sf.write(str(paths[song.name]), load_audio_at(song, MADMOM_SR), MADMOM_SR)
-        by_path = madmom_tracks(python, list(paths.values()), MADMOM_TRACKERS)
+        by_path = madmom_tracks(python, list(paths.values()), trackers)
     return {name: by_path[str(path)] for name, path in paths.items()}
 
 
@@ -692,7 +695,9 @@ def run_real_bench(
     if madmom_python is not None:
         if progress is not None:
             progress("madmom (offline, online, downbeats)")
-        madmom = _madmom_tracks(madmom_python, songs)
+        from benchmarks.beats import MADMOM_TRACKERS
+
+        madmom = madmom_song_tracks(madmom_python, songs, MADMOM_TRACKERS)
     rows = []
     for song in songs:
         if progress is not None:
