@@ -10,8 +10,12 @@ import os
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from quaddance.dancefile import Dance
 
 #: Faults, when they are injected (dance s) and how long the dance is (s).
 FAULT_RUNS: tuple[tuple[str, float, float], ...] = (
@@ -23,13 +27,15 @@ FAULT_RUNS: tuple[tuple[str, float, float], ...] = (
 DEADLINES_S = {"push": 1.5, "freeze": 0.1, "nan": 0.06}
 
 
-def _deploy(policy, targets, seconds, backend: str, inject=()) -> dict:
+def _deploy(policy, dance, seconds, backend: str, inject=()) -> dict:
+    """`deploy` of ``dance``'s first ``seconds`` (paw and body targets, as `dance` plays)."""
     from quaddance.deploy.job import BackendOptions, make_robot
     from quaddance.deploy.runner import DeployOptions, Runner
 
     robot = make_robot(BackendOptions(robot=backend), policy.task.scene.robot)
     opts = DeployOptions(seconds=seconds, auto_start=True, inject=list(inject))
-    return Runner(robot, policy, targets, opts).run().summary
+    runner = Runner(robot, policy, dance.targets_m, opts, body_targets=dance.body_targets)
+    return runner.run().summary
 
 
 def _mean_mae(front: dict | None) -> float | None:
@@ -62,7 +68,7 @@ def _songs(tmp: Path, seconds: float) -> list[tuple[str, Path]]:
     return songs
 
 
-def _compare(policy, song: Path, seconds: float, backend: str, log) -> tuple[dict, np.ndarray]:
+def _compare(policy, song: Path, seconds: float, backend: str, log) -> tuple[dict, Dance]:
     """The song's first ``seconds`` by `dance` and by `deploy --robot BACKEND`."""
     from quaddance.pipeline import DanceSpec, make_dance
     from quaddance.play.dance import feasible_max_height_m, spec_for_policy
@@ -84,7 +90,7 @@ def _compare(policy, song: Path, seconds: float, backend: str, log) -> tuple[dic
         "falls": sum(1 for t in played.falls_s if t < n / policy.task.policy_hz),
     }
     log(f"  deploy --robot {backend}, {n / policy.task.policy_hz:.0f} s in real time")
-    dep = _deploy(policy, dance.targets_m[:n], n / policy.task.policy_hz, backend)
+    dep = _deploy(policy, dance, n / policy.task.policy_hz, backend)
     deploy_res = {
         k: dep[k]
         for k in (
@@ -106,7 +112,7 @@ def _compare(policy, song: Path, seconds: float, backend: str, log) -> tuple[dic
         "seconds": n / policy.task.policy_hz,
         "dance": dance_res,
         "deploy_sim": deploy_res,
-    }, dance.targets_m
+    }, dance
 
 
 def run(seconds: float = 20.0, log: Callable[[str], None] = print, backend: str = "sim") -> dict:
@@ -122,14 +128,14 @@ def run(seconds: float = 20.0, log: Callable[[str], None] = print, backend: str 
     with tempfile.TemporaryDirectory() as tmp:
         for i, (name, path) in enumerate(_songs(Path(tmp), seconds)):
             log(f"{name}: dance, then deploy")
-            songs[name], targets = _compare(policy, path, seconds, backend, log)
+            songs[name], dance = _compare(policy, path, seconds, backend, log)
             if i == 0:
-                demo_targets = targets
+                demo = dance
 
     faults = {}
     for fault, at_s, dance_s in FAULT_RUNS:
         log(f"fault {fault}@{at_s:g}")
-        s = _deploy(policy, demo_targets, dance_s, backend, [(fault, at_s)])
+        s = _deploy(policy, demo, dance_s, backend, [(fault, at_s)])
         (inj,) = s["injected"]
         damp = [e for e in s["events"] if e["to"] == "damp"]
         faults[fault] = {

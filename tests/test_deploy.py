@@ -138,6 +138,46 @@ def test_runner_builds_the_training_observation_and_targets(policy):
         obs_env = env.step(action)[0]["actor"]
 
 
+def test_the_runner_feedforward_is_the_one_of_each_target_row_extended_and_faded(policy):
+    """The controller makes each row's feed-forward and observation part when the row arrives
+    (not in the tick): the same as made from the rows at the tick, for rows appended by a live
+    dance (whose previews reach into the new rows) and for the rows of the fade to rest."""
+    from quaddance.sim.task import row_feedforward
+
+    rng = np.random.default_rng(4)
+    paws = rng.uniform(0.0, 0.08, (20, 4)) * [1, 1, 0, 0]
+    body = rng.uniform(-0.1, 0.1, (20, 4)) * [0.3, 1, 1, 1]
+    ctrl = DanceController(policy, paws[:12], body[:12])
+    ctrl.extend(paws[12:], body[12:])
+    assert ctrl.n_steps == 20
+
+    still = Reading(
+        seq=0,
+        stamp_s=0.0,
+        quat_wxyz=np.array([1.0, 0.0, 0.0, 0.0]),
+        gyro_rad_s=np.zeros(3),
+        joint_pos_rad=np.asarray(policy.spec.nominal_joint_pos_rad, dtype=np.float64),
+        joint_vel_rad_s=np.zeros(12),
+    )
+    ctrl.reset(still)
+
+    def check(step: int) -> None:
+        prop, obs = ctrl.observe(still, step)  # the targets' part as made ahead
+        live = ctrl.actor_obs.build(prop, ctrl.targets_at, ctrl.body_targets_at)
+        assert torch.equal(obs, live), f"step {step}"
+        row = ctrl.target_row(1)
+        want = row_feedforward(row, ctrl.feedforward, ctrl.body_feedforward)
+        assert torch.allclose(ctrl.feedforward_at(1), want, atol=1e-6, rtol=0), f"step {step}"
+        assert want.abs().max() > 0.01
+
+    for step in (0, 9, 11, 12, 18, 25):  # before and after the extension, and past the end
+        check(step)
+    ctrl.step = 15
+    ctrl.fade_out(10)
+    for step in (15, 19, 30):
+        check(step)
+
+
 # --- the real Go1's SDK: mapping only, nothing is ever sent ----------------------------------
 
 

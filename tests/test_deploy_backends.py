@@ -237,9 +237,10 @@ def test_bench_deploy_robot_runs_that_backend_with_its_robots_policy(tmp_path, m
     def compare(policy, song, seconds, backend, log):
         ran.append((policy.robot.name, backend))
         run = {"front_mae_mean_m": 0.002, "falls": 0, "tick_ms": {}}
-        return {"dance": run, "deploy_sim": run}, np.zeros((50, 4))
+        return {"dance": run, "deploy_sim": run}, "the demo's dance"
 
-    def deploy(policy, targets, seconds, backend, inject=()):
+    def deploy(policy, dance, seconds, backend, inject=()):
+        assert dance == "the demo's dance"  # the faults are run on the demo song's dance
         ran.append((policy.robot.name, backend))
         (fault, at_s), t_damp = inject[0], inject[0][1] + 0.05
         events = [] if fault == "lag" else [{"to": "damp", "t_s": t_damp, "reason": fault}]

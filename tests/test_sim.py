@@ -18,7 +18,14 @@ from quaddance.sim.config import DanceTaskCfg, RewardTerm
 from quaddance.sim.engines import CpuEngine, apply_dynamics
 from quaddance.sim.kinematics import estimate_foot_height_m, leg_geometry
 from quaddance.sim.scene import SceneCfg, build_model
-from quaddance.sim.state import SensorLayout, quat_rotate_inverse, state_from_arrays
+from quaddance.sim.state import (
+    SensorLayout,
+    gravity_from_sums,
+    quat_rotate_inverse,
+    quat_sums,
+    rpy_from_sums,
+    state_from_arrays,
+)
 from quaddance.sim.task import DanceEnv, sample_dynamics
 
 POLICY_HZ = 50
@@ -125,6 +132,17 @@ def test_quat_rotate_inverse_matches_scipy():
     wxyz = torch.tensor(np.concatenate([xyzw[:, 3:], xyzw[:, :3]], axis=1))
     got = quat_rotate_inverse(wxyz, torch.tensor(vec)).numpy()
     np.testing.assert_allclose(got, rot.inv().apply(vec), atol=1e-12)
+
+
+def test_gravity_and_angles_from_one_pass_over_the_quaternion_match_scipy():
+    rot = Rotation.random(64, random_state=11)
+    xyzw = rot.as_quat()
+    sums = quat_sums(torch.tensor(np.concatenate([xyzw[:, 3:], xyzw[:, :3]], axis=1)))
+    down_b = rot.inv().apply(np.array([0.0, 0.0, -1.0]))
+    np.testing.assert_allclose(gravity_from_sums(sums).numpy(), down_b, atol=1e-12)
+    # Extrinsic x-y-z (R = R_z R_y R_x): scipy's intrinsic "ZYX" read backwards.
+    yaw_pitch_roll = rot.as_euler("ZYX")
+    np.testing.assert_allclose(rpy_from_sums(sums).numpy(), yaw_pitch_roll[:, ::-1], atol=1e-9)
 
 
 def test_projected_gravity_upright_pitched_and_upside_down():

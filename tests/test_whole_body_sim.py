@@ -324,3 +324,21 @@ def _shipped_policy():
     from quaddance.play.policy import OnnxPolicy, shipped_policy_path
 
     return OnnxPolicy.load(shipped_policy_path())
+
+
+@pytest.mark.parametrize("curriculum", [1.0, 0.5])
+def test_the_feedforward_looked_up_is_the_one_of_the_rows_targets(curriculum):
+    """The task makes each bank row's feed-forward once; what a step looks up equals the
+    feed-forward of the row it reads (the body scaled by the curriculum), made there."""
+    from quaddance.sim.task import row_feedforward
+
+    poses = [(0.0, 0, 0, 0), (-0.04, 0.1, 0, 0), (0.02, 0, -0.12, 0.2)]
+    env, _ = _hold_env(poses, whole_body=True, curriculum=curriculum)
+    row = env.target_row(1)
+    assert torch.allclose(env.body_targets_at(1), curriculum * env.bank[env.bank_idx, -1, 4:])
+    want = row_feedforward(row, env.feedforward, env.body_feedforward)
+    assert want[1:].abs().amax(dim=1).min() > 0.02  # each pose moves joints
+    assert torch.allclose(env.feedforward_at(1), want, atol=1e-6, rtol=0)
+    assert torch.allclose(
+        env.joint_targets(torch.zeros(3, 12)), env.nominal_joint_pos + want, atol=1e-6, rtol=0
+    )

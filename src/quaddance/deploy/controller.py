@@ -13,13 +13,13 @@ import torch
 
 from quaddance.deploy.robot import Reading
 from quaddance.errors import QuaddanceError
-from quaddance.layout import BODY, FRONT_PAWS, PAWS
+from quaddance.layout import BODY, PAWS
 from quaddance.play.policy import OnnxPolicy
 from quaddance.sim.body import BodyFeedforward
 from quaddance.sim.feedforward import FrontLiftFeedforward
 from quaddance.sim.observations import ActorObservation, Measurement
 from quaddance.sim.state import yaw_from_quat
-from quaddance.sim.task import joint_targets
+from quaddance.sim.task import joint_targets, row_feedforward
 
 
 class DanceController:
@@ -61,6 +61,10 @@ class DanceController:
         self.body_feedforward = (
             BodyFeedforward(cfg.scene.robot, self.dev) if cfg.whole_body else None
         )
+        # Each row's feed-forward and observation part, made once for the whole dance (not
+        # in the real-time tick).
+        self.ff_rows = self._feedforward_of(self.rows)
+        self.obs_rows = self.actor_obs.rows_part(self.rows)
         self.step = 0  # dance step (policy ticks since dance time 0)
         self.heading_zero_rad = 0.0  # IMU yaw at dance time 0 (`reset`)
         self._measured: tuple[Reading, Measurement] | None = None  # the last reading's
@@ -86,7 +90,18 @@ class DanceController:
             ],
             dim=1,
         )
+        n = self.n_steps
         self.rows = torch.cat([self.rows, more], dim=0)
+        if self.ff_rows is not None:
+            self.ff_rows = torch.cat([self.ff_rows, self._feedforward_of(more)], dim=0)
+        # The last rows' previews now see the new rows: their part is made again.
+        start = max(0, n - max(self.actor_obs.preview_steps, default=0))
+        self.obs_rows = torch.cat(
+            [self.obs_rows[:start], self.actor_obs.rows_part(self.rows[start:])], dim=0
+        )
+
+    def _feedforward_of(self, rows: torch.Tensor) -> torch.Tensor | None:
+        return row_feedforward(rows, self.feedforward, self.body_feedforward)
 
     def target_row(self, ahead_steps: int) -> torch.Tensor:
         """(1, 8) `targets_at` then `body_targets_at` of ``ahead_steps``."""
@@ -97,11 +112,13 @@ class DanceController:
             return row + u * (self.rest_row - row)
         return self.rows[min(k, self.n_steps - 1)][None]
 
-    def lift_feedforward(self, ahead_steps: int) -> torch.Tensor | None:
-        """(1, 12) the front-lift feed-forward of `targets_at` ``ahead_steps``; None without."""
-        if self.feedforward is None:
+    def feedforward_at(self, ahead_steps: int) -> torch.Tensor | None:
+        """(1, 12) `row_feedforward` of `target_row` ``ahead_steps``; None without."""
+        if self.ff_rows is None:
             return None
-        return self.feedforward(self.target_row(ahead_steps)[:, FRONT_PAWS])
+        if self._fade is not None:  # rows made as the dance fades: their own feed-forward
+            return self._feedforward_of(self.target_row(ahead_steps))
+        return self.ff_rows[min(self.step + ahead_steps, self.n_steps - 1)][None]
 
     def targets_at(self, ahead_steps: int) -> torch.Tensor:
         """(1, 4) paw targets ``ahead_steps`` ticks from the current step (held at the end;
@@ -122,13 +139,14 @@ class DanceController:
         made once per reading (the runner's posture checks and the observation both read it)."""
         if self._measured is not None and self._measured[0] is reading:
             return self._measured[1]
-        t = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float32)[None]  # noqa: E731
+        # One float32 row made in numpy, read through views: one torch op, not eight.
+        parts = (reading.quat_wxyz, reading.gyro_rad_s, reading.joint_pos_rad)
+        row = torch.from_numpy(
+            np.concatenate([*parts, reading.joint_vel_rad_s]).astype(np.float32)[None]
+        )
+        q, g, j = 4, 7, 7 + len(reading.joint_pos_rad)
         meas = Measurement.from_imu(
-            t(reading.quat_wxyz),
-            t(reading.gyro_rad_s),
-            t(reading.joint_pos_rad),
-            t(reading.joint_vel_rad_s),
-            self.heading_zero_rad,
+            row[:, :q], row[:, q:g], row[:, g:j], row[:, j:], self.heading_zero_rad
         )
         self._measured = (reading, meas)
         return meas
@@ -149,7 +167,8 @@ class DanceController:
         """(proprio frame, observation (1, D)) at dance step ``step``."""
         self.step = step
         prop = self.actor_obs.proprio(self.measurement(reading), self.last_action)
-        return prop, self.actor_obs.build(prop, self.targets_at, self.body_targets_at)
+        part = None if self._fade is not None else self.obs_rows[min(step, self.n_steps - 1)][None]
+        return prop, self.actor_obs.build(prop, self.targets_at, self.body_targets_at, part)
 
     def commit(self, prop: torch.Tensor, action: torch.Tensor) -> None:
         """The frame just seen joins the history; ``action`` is what the robot now does."""

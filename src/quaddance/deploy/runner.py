@@ -26,7 +26,6 @@ from quaddance.deploy.state_machine import DanceStates
 from quaddance.deploy.states import DeployState
 from quaddance.errors import QuaddanceError
 from quaddance.play.policy import OnnxPolicy
-from quaddance.sim.kinematics import foot_pos_b
 
 #: Real-time priority of the runner; the simulated robot's (a separate machine's motor
 #: boards, in reality) is above it.
@@ -93,9 +92,8 @@ class Runner:
         above the lowest foot's bottom, from the IMU and encoders."""
         meas = self.ctrl.measurement(reading)
         g = meas.projected_gravity_b[0].numpy().astype(np.float64)
-        # Foot centres along world up, trunk frame origin at 0 (kinematics.py's estimator
-        # subtracts the lowest one; the trunk height is minus it).
-        z = foot_pos_b(meas.joint_pos_rad, self.geom)[0].numpy() @ (-g / np.linalg.norm(g))
+        # The observation's own foot heights along world up (made once per reading).
+        z = meas.foot_up_m(self.geom)[0].numpy().astype(np.float64)
         return g, z - z.min(), float(-z.min()) + self.ctrl.cfg.scene.robot.foot_radius_m
 
     # --- the loop --------------------------------------------------------------------------

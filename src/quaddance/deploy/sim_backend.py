@@ -30,6 +30,7 @@ from quaddance.robots import get_robot
 # Wire format (little-endian). State: kind, seq, robot time s, monotonic time of the
 # measurement s, quat 4, gyro 3, q 12, dq 12, foot force 4, battery %, remote buttons.
 _STATE = struct.Struct("<cIdd36fH")
+_SEQ = struct.Struct("<xI")  # a state packet's seq, read before the rest is decoded
 _CMD = struct.Struct("<cI60f")  # kind, seq, q 12, dq 12, kp 12, kd 12, tau_ff 12
 
 
@@ -99,6 +100,9 @@ class SimUdpRobot(Robot):
         raise QuaddanceError(f"no state from the simulated robot within {timeout_s:g} s")
 
     def read(self) -> Reading | None:
+        # The robot sends at 1 kHz, the runner reads at 50 Hz: of the packets waiting, only
+        # the newest is decoded.
+        newest, newest_seq = None, -1 if self._latest is None else self._latest.seq
         while True:
             try:
                 msg, addr = self._sock.recvfrom(1024)
@@ -107,9 +111,11 @@ class SimUdpRobot(Robot):
             if msg[:1] != b"S" or len(msg) != _STATE.size:
                 continue
             self._robot_addr = addr
-            v = _STATE.unpack(msg)
-            if self._latest is not None and v[1] <= self._latest.seq:
-                continue
+            seq = _SEQ.unpack_from(msg)[0]
+            if seq > newest_seq:
+                newest, newest_seq = msg, seq
+        if newest is not None:
+            v = _STATE.unpack(newest)
             f = np.asarray(v[4:40], dtype=np.float64)
             self._latest = Reading(
                 seq=v[1],

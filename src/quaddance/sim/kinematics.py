@@ -167,17 +167,28 @@ def foot_pos_b(joint_pos: torch.Tensor, geom: LegGeometry) -> torch.Tensor:
     return t.hip_pos_b + _rotate(p, cos[2], sin[2], t.swap[2])
 
 
+def foot_up_m(
+    joint_pos: torch.Tensor, projected_gravity_b: torch.Tensor, geom: LegGeometry
+) -> torch.Tensor:
+    """(N, 4) the foot sphere centres' heights along world up relative to the trunk's origin,
+    m, from the encoders (N, 12; model order, rad) and the IMU's unit gravity direction in
+    the trunk frame (N, 3). Minus the lowest is the trunk's height above that foot's centre."""
+    norm = torch.linalg.vector_norm(projected_gravity_b, dim=1, keepdim=True).clamp(min=1e-6)
+    up_b = -projected_gravity_b / norm
+    return (foot_pos_b(joint_pos, geom) * up_b[:, None, :]).sum(dim=2)
+
+
+def foot_height_from_up(up_m: torch.Tensor) -> torch.Tensor:
+    """(N, 4) foot-bottom heights above a floor through the lowest foot, m, of `foot_up_m`.
+
+    The lowest foot reads 0; on flat ground with three feet down this equals the true height
+    of each foot's bottom above the floor up to contact penetration (a few mm)."""
+    return up_m - up_m.amin(dim=1, keepdim=True)
+
+
 def estimate_foot_height_m(
     joint_pos: torch.Tensor, projected_gravity_b: torch.Tensor, geom: LegGeometry
 ) -> torch.Tensor:
-    """(N, 4) foot-bottom heights above a floor through the lowest foot, m.
-
-    ``joint_pos`` (N, 12) as the encoders read them (model order, rad);
-    ``projected_gravity_b`` (N, 3) the IMU's unit gravity direction in the trunk frame. The
-    lowest foot reads 0; on flat ground with three feet down this equals the true height of
-    each foot's bottom above the floor up to contact penetration (a few mm).
-    """
-    norm = torch.linalg.vector_norm(projected_gravity_b, dim=1, keepdim=True).clamp(min=1e-6)
-    up_b = -projected_gravity_b / norm
-    z = (foot_pos_b(joint_pos, geom) * up_b[:, None, :]).sum(dim=2)  # height along world up
-    return z - z.amin(dim=1, keepdim=True)
+    """(N, 4) foot-bottom heights above a floor through the lowest foot, m (`foot_up_m`, then
+    `foot_height_from_up`)."""
+    return foot_height_from_up(foot_up_m(joint_pos, projected_gravity_b, geom))

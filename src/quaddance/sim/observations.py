@@ -16,15 +16,21 @@ class, so the observation is defined once.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import torch
 
-from quaddance.layout import FRONT_PAWS
+from quaddance.layout import BODY, FRONT_PAWS, PAWS
 from quaddance.sim.config import DanceTaskCfg, DomainRandCfg, ObsSlice
-from quaddance.sim.kinematics import estimate_foot_height_m, leg_geometry
-from quaddance.sim.state import RobotState, quat_rotate_inverse, wrap_angle_rad, yaw_from_quat
+from quaddance.sim.kinematics import LegGeometry, foot_height_from_up, foot_up_m, leg_geometry
+from quaddance.sim.state import (
+    RobotState,
+    gravity_from_sums,
+    quat_sums,
+    rpy_from_sums,
+    wrap_angle_rad,
+)
 
 
 @dataclass
@@ -36,6 +42,14 @@ class Measurement:
     joint_pos_rad: torch.Tensor  # (N, 12) encoder readings (calibration offset included)
     joint_vel_rad_s: torch.Tensor  # (N, 12)
     heading_rad: torch.Tensor  # (N,) IMU yaw, relative to the heading at the dance's start
+    _foot_up: torch.Tensor | None = field(default=None, repr=False, compare=False)
+
+    def foot_up_m(self, geom: LegGeometry) -> torch.Tensor:
+        """(N, 4) `kinematics.foot_up_m` of these readings, made at the first call (the
+        observation's foot heights and the runner's posture checks both read it)."""
+        if self._foot_up is None:
+            self._foot_up = foot_up_m(self.joint_pos_rad, self.projected_gravity_b, geom)
+        return self._foot_up
 
     @classmethod
     def from_imu(
@@ -48,11 +62,10 @@ class Measurement:
     ) -> Measurement:
         """From the IMU's orientation quaternion (N, 4; w, x, y, z) as a Go1 reports it;
         ``heading_zero_rad`` is the IMU yaw when the dance began."""
-        down = torch.zeros(quat_wxyz.shape[0], 3, dtype=quat_wxyz.dtype, device=quat_wxyz.device)
-        down[:, 2] = -1.0
-        heading = wrap_angle_rad(yaw_from_quat(quat_wxyz) - heading_zero_rad)
+        sums = quat_sums(quat_wxyz)
+        heading = wrap_angle_rad(rpy_from_sums(sums)[:, 2] - heading_zero_rad)
         return cls(
-            quat_rotate_inverse(quat_wxyz, down),
+            gravity_from_sums(sums),
             gyro_rad_s,
             joint_pos_rad,
             joint_vel_rad_s,
@@ -123,9 +136,7 @@ PROPRIO_TERMS: tuple[ObsTerm, ...] = (
     # Leg kinematics from the encoders, turned upright by the IMU (sim/kinematics.py).
     ObsTerm(
         "foot_height_m",
-        lambda ob: estimate_foot_height_m(
-            ob.meas.joint_pos_rad, ob.meas.projected_gravity_b, ob.geom
-        ),
+        lambda ob: foot_height_from_up(ob.meas.foot_up_m(ob.geom)),
         "kinematics",
     ),
 )
@@ -199,6 +210,15 @@ class ObsLayout:
         }
 
 
+@dataclass(frozen=True)
+class _RowView:
+    """What the `ActorObservation.row_terms` read, for rows made ahead (`rows_part`)."""
+
+    targets_at: Callable[[int], torch.Tensor]
+    body_targets_at: Callable[[int], torch.Tensor]
+    preview_steps: list[int]
+
+
 class ActorObservation:
     """The actor's input: [proprio now, proprio history, dance terms].
 
@@ -226,6 +246,13 @@ class ActorObservation:
         proprio = [(t, t.fn(self).shape[1]) for t in PROPRIO_TERMS]
         dance = [(t, t.fn(self).shape[1]) for t in dance_terms(cfg)]
         self.dance_terms = tuple(t for t, size in dance if size)
+        #: The dance terms made of the target rows alone (source "dance"), which come first: a
+        #: task that knows its rows ahead makes them once per row (`rows_part`), the others
+        #: (`step_terms`, which also read the sensors) at each step.
+        self.row_terms = tuple(t for t in self.dance_terms if t.source == "dance")
+        self.step_terms = self.dance_terms[len(self.row_terms) :]
+        if any(t.source == "dance" for t in self.step_terms):
+            raise ValueError("the dance terms made of the targets alone must come first")
         self.proprio_dim = sum(size for _, size in proprio)
         history_source = "+".join(sorted({t.source for t in PROPRIO_TERMS}))
         self.layout: tuple[ObsSlice, ...] = (
@@ -244,20 +271,38 @@ class ActorObservation:
         self.meas, self.last_action = meas, last_action
         return torch.cat([t.fn(self) for t in PROPRIO_TERMS], dim=1)
 
+    def rows_part(self, rows: torch.Tensor) -> torch.Tensor:
+        """(..., L, k) the `row_terms` of each of L target rows [paws | body] (..., L, 8) in
+        sequence: a row's previews read the rows after it (held at the sequence's end). What
+        `build` makes of a step's rows when it is not given them."""
+        n = rows.shape[-2]
+
+        def later(k: int, cols: slice) -> torch.Tensor:
+            idx = (torch.arange(n, device=rows.device) + k).clamp(max=n - 1)
+            return rows.index_select(-2, idx)[..., cols].reshape(-1, cols.stop - cols.start)
+
+        view = _RowView(lambda k: later(k, PAWS), lambda k: later(k, BODY), self.preview_steps)
+        parts = [t.fn(view) for t in self.row_terms]
+        part = torch.cat(parts, dim=1) if parts else later(0, PAWS)[:, :0]
+        return part.view(*rows.shape[:-1], -1)
+
     def build(
         self,
         prop: torch.Tensor,
         targets_at: Callable[[int], torch.Tensor],
         body_targets_at: Callable[[int], torch.Tensor] | None = None,
+        rows_part: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """(N, dim): ``targets_at(k)`` gives the (N, 4) paw targets k policy steps ahead, m;
-        ``body_targets_at(k)`` the (N, 4) body targets (whole-body dance only)."""
+        ``body_targets_at(k)`` the (N, 4) body targets (whole-body dance only);
+        ``rows_part``, the `rows_part` of this step's rows where they were made ahead."""
         if self.whole_body and body_targets_at is None:
             raise ValueError("a whole-body policy needs the dance's body targets")
         self.targets_at = targets_at
         if body_targets_at is not None:
             self.body_targets_at = body_targets_at
-        parts = [prop, self.history.flatten(1), *(t.fn(self) for t in self.dance_terms)]
+        rows = [rows_part] if rows_part is not None else [t.fn(self) for t in self.row_terms]
+        parts = [prop, self.history.flatten(1), *rows, *(t.fn(self) for t in self.step_terms)]
         return torch.cat(parts, dim=1)
 
     def push(self, prop: torch.Tensor) -> None:

@@ -143,26 +143,19 @@ class RobotState:
         return z - scalar_tensor(self.foot_radius_m, z)
 
     @_once
+    def _quat_sums(self) -> torch.Tensor:
+        """`quat_sums` of the trunk's quaternion: what its gravity and angles are made of."""
+        return quat_sums(self.base_quat_w)
+
+    @_once
     def projected_gravity_b(self) -> torch.Tensor:
         """(N, 3) unit gravity direction in the body frame."""
-        quat = self.base_quat_w
-        down = _rpy_consts(quat.device, quat.dtype).down
-        return quat_rotate_inverse(quat, down.expand(quat.shape[0], 3))
+        return gravity_from_sums(self._quat_sums)
 
     @_once
     def base_rpy_rad(self) -> torch.Tensor:
-        """(N, 3) roll, pitch, yaw of the trunk (extrinsic x-y-z, as `sim.body.rpy_matrix`):
-        roll = atan2(2 (w x + y z), 1 - 2 (x x + y y)), pitch = asin(2 (w y - z x)) and
-        yaw = atan2(2 (w z + x y), 1 - 2 (y y + z z)), all three in one pass."""
-        quat = self.base_quat_w
-        c = _rpy_consts(quat.device, quat.dtype)
-        # (N, 2, 6): the two products of each of `_RPY_SUMS`, column by column.
-        prod = (quat.index_select(1, c.left) * quat.index_select(1, c.right)).view(-1, 2, 6)
-        first, second = prod.unbind(1)
-        sums = first + second * c.sign
-        twice = sums + sums
-        num, den = twice[:, 0:3], scalar_tensor(1.0, twice) - twice[:, 3:6]  # [1]: unused
-        return torch.where(c.is_pitch, num.clamp(-1.0, 1.0).asin(), torch.atan2(num, den))
+        """(N, 3) roll, pitch, yaw of the trunk (extrinsic x-y-z, as `sim.body.rpy_matrix`)."""
+        return rpy_from_sums(self._quat_sums)
 
     @property
     def base_yaw_rad(self) -> torch.Tensor:
@@ -175,10 +168,10 @@ class RobotState:
 
 
 _W, _X, _Y, _Z = range(4)
-#: `RobotState.base_rpy_rad`'s sums of two quaternion products, (first, second, sign of the
-#: second): the roll, pitch and yaw numerators, then the roll and yaw denominators (pitch's
-#: column there is unused).
-_RPY_SUMS = (
+#: `quat_sums`' columns, each a sum of two quaternion products (first, second, sign of the
+#: second), doubled: the roll, pitch and yaw numerators, then 2 (x x + y y) twice (roll's
+#: denominator; in the pitch column, unused) and 2 (y y + z z) (yaw's denominator).
+_QUAT_SUMS = (
     ((_W, _X), (_Y, _Z), 1.0),
     ((_W, _Y), (_Z, _X), -1.0),
     ((_W, _Z), (_X, _Y), 1.0),
@@ -186,33 +179,66 @@ _RPY_SUMS = (
     ((_X, _X), (_Y, _Y), 1.0),
     ((_Y, _Y), (_Z, _Z), 1.0),
 )
+#: Gravity in the body frame from `quat_sums`: R^T (0, 0, -1) = (2 (w y - z x),
+#: -2 (w x + y z), 2 (x x + y y) - 1), as (column, sign, offset) each.
+_GRAVITY = ((1, 1.0, 0.0), (0, -1.0, 0.0), (3, 1.0, -1.0))
 
 
-class _RpyConsts(NamedTuple):
+class _QuatConsts(NamedTuple):
     left: torch.Tensor  # the products' left factors: all first products, then all second
     right: torch.Tensor
     sign: torch.Tensor
     is_pitch: torch.Tensor  # (3,) bool: the column read with asin
-    down: torch.Tensor  # (1, 3) gravity's direction in the world
+    gravity_cols: torch.Tensor  # `_GRAVITY`
+    gravity_sign: torch.Tensor
+    gravity_offset: torch.Tensor
 
 
 @functools.lru_cache(maxsize=8)
-def _rpy_consts(device: torch.device, dtype: torch.dtype) -> _RpyConsts:
-    products = [row[0] for row in _RPY_SUMS] + [row[1] for row in _RPY_SUMS]
+def _quat_consts(device: torch.device, dtype: torch.dtype) -> _QuatConsts:
+    products = [row[0] for row in _QUAT_SUMS] + [row[1] for row in _QUAT_SUMS]
+    f = lambda values: torch.tensor(values, device=device, dtype=dtype)  # noqa: E731
     with torch.inference_mode(False):  # usable in and out of inference mode
-        return _RpyConsts(
+        return _QuatConsts(
             left=torch.tensor([a for a, _ in products], device=device),
             right=torch.tensor([b for _, b in products], device=device),
-            sign=torch.tensor([row[2] for row in _RPY_SUMS], device=device, dtype=dtype),
+            sign=f([row[2] for row in _QUAT_SUMS]),
             is_pitch=torch.tensor([False, True, False], device=device),
-            down=torch.tensor([[0.0, 0.0, -1.0]], device=device, dtype=dtype),
+            gravity_cols=torch.tensor([g[0] for g in _GRAVITY], device=device),
+            gravity_sign=f([g[1] for g in _GRAVITY]),
+            gravity_offset=f([g[2] for g in _GRAVITY]),
         )
+
+
+def quat_sums(quat_wxyz: torch.Tensor) -> torch.Tensor:
+    """(N, 6) the `_QUAT_SUMS` of unit quaternions (N, 4; w, x, y, z), in one pass: the
+    products that both the gravity direction and the roll-pitch-yaw angles are made of."""
+    c = _quat_consts(quat_wxyz.device, quat_wxyz.dtype)
+    # (N, 2, 6): the two products of each sum, column by column.
+    prod = (quat_wxyz.index_select(1, c.left) * quat_wxyz.index_select(1, c.right)).view(-1, 2, 6)
+    first, second = prod.unbind(1)
+    sums = first + second * c.sign
+    return sums + sums
+
+
+def gravity_from_sums(sums: torch.Tensor) -> torch.Tensor:
+    """(N, 3) unit gravity direction in the body frame, from `quat_sums`."""
+    c = _quat_consts(sums.device, sums.dtype)
+    return torch.addcmul(c.gravity_offset, sums.index_select(1, c.gravity_cols), c.gravity_sign)
+
+
+def rpy_from_sums(sums: torch.Tensor) -> torch.Tensor:
+    """(N, 3) roll, pitch, yaw (extrinsic x-y-z, as `sim.body.rpy_matrix`) from `quat_sums`:
+    roll = atan2(2 (w x + y z), 1 - 2 (x x + y y)), pitch = asin(2 (w y - z x)) and
+    yaw = atan2(2 (w z + x y), 1 - 2 (y y + z z))."""
+    c = _quat_consts(sums.device, sums.dtype)
+    num, den = sums[:, 0:3], scalar_tensor(1.0, sums) - sums[:, 3:6]  # [1]: unused
+    return torch.where(c.is_pitch, num.clamp(-1.0, 1.0).asin(), torch.atan2(num, den))
 
 
 def yaw_from_quat(quat_wxyz: torch.Tensor) -> torch.Tensor:
     """(N,) yaw (heading about the world vertical, rad) of (N, 4) w x y z quaternions."""
-    w, x, y, z = quat_wxyz.unbind(-1)
-    return torch.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return rpy_from_sums(quat_sums(quat_wxyz))[:, 2]
 
 
 def wrap_angle_rad(angle: torch.Tensor) -> torch.Tensor:

@@ -47,40 +47,47 @@ class JointTargetSource(Protocol):
 
     nominal_joint_pos: torch.Tensor
     action_scale: torch.Tensor
-    body_feedforward: BodyFeedforward | None
 
-    def target_row(self, ahead_steps: int) -> torch.Tensor:
-        """(N, 8) the paw then the body targets ``ahead_steps`` policy steps from now."""
+    def feedforward_at(self, ahead_steps: int) -> torch.Tensor | None:
+        """(N, 12) the feed-forward (`row_feedforward`) of the target row ``ahead_steps``
+        policy steps from now; None for a task without one."""
         ...
 
-    def lift_feedforward(self, ahead_steps: int) -> torch.Tensor | None:
-        """(N, 12) the front-lift feed-forward (`sim.feedforward`) of the paw targets
-        ``ahead_steps`` policy steps from now; None without it."""
-        ...
+
+def row_feedforward(
+    rows: torch.Tensor, lift: FrontLiftFeedforward | None, body: BodyFeedforward | None
+) -> torch.Tensor | None:
+    """(T, 12) joint offsets (rad, model order) that target rows (T, 8) [paws | body] call
+    for: the front-lift feed-forward of the front paws' targets (`sim.feedforward`) plus, for
+    whole-body dance, the body feed-forward of the trunk's (`sim.body`); None with neither.
+
+    A function of the row alone, so a task with fixed rows makes it once for all of them
+    (training's bank, the runner's dance) instead of at every step."""
+    ff = None if lift is None else lift(rows[:, FRONT_PAWS])
+    if body is not None:
+        offsets = body(rows[:, BODY])
+        ff = offsets if ff is None else ff + offsets
+    return ff
 
 
 def joint_targets(actions: torch.Tensor, src: JointTargetSource) -> torch.Tensor:
-    """(N, 12) PD targets: nominal pose + scaled actions + the front-lift feed-forward (and,
-    for whole-body dance, the body feed-forward) for the targets due after this step (the
-    contract written into the policy's JSON). Training and the robot runner (deploy/) both
-    call this."""
+    """(N, 12) PD targets: nominal pose + scaled actions + the feed-forward of the targets
+    due after this step (`row_feedforward`; the contract written into the policy's JSON).
+    Training, playback and the robot runner (deploy/) all call this."""
     target = src.nominal_joint_pos + src.action_scale * actions
-    lift = src.lift_feedforward(1)
-    if lift is not None:
-        target = target + lift
-    if src.body_feedforward is not None:
-        target = target + src.body_feedforward(src.target_row(1)[:, BODY])
-    return target
+    ff = src.feedforward_at(1)
+    return target if ff is None else target + ff
 
 
 class _StepRows(NamedTuple):
     """One step's target rows by offset (policy steps ahead): whole, paws, body, and the
-    front-lift feed-forward of each."""
+    feed-forward of each; and the observation's part made of this step's rows."""
 
     full: dict[int, torch.Tensor]
     paws: dict[int, torch.Tensor]
     body: dict[int, torch.Tensor]
-    lift: dict[int, torch.Tensor] | None  # the front-lift feed-forward, when the task has it
+    ff: dict[int, torch.Tensor] | None  # `row_feedforward`, when the task has one
+    obs: torch.Tensor | None  # `ActorObservation.rows_part`; None: the step makes it
 
 
 class DanceEnv:
@@ -148,15 +155,18 @@ class DanceEnv:
             else None
         )
         self.body_feedforward = BodyFeedforward(cfg.scene.robot, dev) if cfg.whole_body else None
-        # What a step looks up in the bank: its rows [paws | body], then the front-lift
-        # feed-forward of each row, made here once. That is a function of the row's paw
-        # targets alone, and made of exactly rounded ops (no sin, atan2, ...), so these are
-        # the numbers it gives row by row.
-        self._lookup = self.bank
-        if self.feedforward is not None:
-            front = self.bank[..., FRONT_PAWS]
-            lift = self.feedforward(front.reshape(-1, front.shape[2]))
-            self._lookup = torch.cat([self.bank, lift.view(*front.shape[:2], -1)], dim=2)
+        # What a step looks up in the bank, made here once for every row (at batch 1, making
+        # them at each step cost half of playback's step): the row [paws | body], its
+        # feed-forward (`row_feedforward`; made in one batch, sin and atan2 may round a last
+        # bit otherwise than row by row), and the observation's terms made of the rows alone
+        # (`ActorObservation.rows_part`: the targets now and ahead).
+        b, n_rows = self.bank.shape[:2]
+        ff = self._feedforward_of(self.bank.reshape(b * n_rows, -1))
+        ff_width = 0 if ff is None else ff.shape[1]
+        ffs = [] if ff is None else [ff.view(b, n_rows, ff_width)]
+        self._lookup = torch.cat([self.bank, *ffs, self.actor_obs.rows_part(self.bank)], dim=2)
+        self._ff_cols = slice(BODY.stop, BODY.stop + ff_width) if ff is not None else None
+        self._obs_cols = slice(BODY.stop + ff_width, None)
         lo = torch.tensor(model.jnt_range[1:, 0], dtype=torch.float32, device=dev)
         hi = torch.tensor(model.jnt_range[1:, 1], dtype=torch.float32, device=dev)
         mid, half = (lo + hi) / 2, (hi - lo) / 2 * 0.9
@@ -179,7 +189,9 @@ class DanceEnv:
         self._ahead: dict[tuple[int, ...], torch.Tensor] = {}  # `_bank_rows`' step offsets
         # Every offset a step reads (observation, joint targets, rewards) and this step's rows
         # at them, looked up together at the first read (`_rows_now`): one lookup per step.
-        self._row_steps = tuple(dict.fromkeys((0, 1, *self.preview_steps)))
+        # The observation's previews are in the rows, but not under a curriculum's scale.
+        self._row_steps = (0, 1)
+        self._row_steps_scaled = tuple(dict.fromkeys((0, 1, *self.preview_steps)))
         self._rows: _StepRows | None = None
         self._lag_index = self._lag_gather_index()
         self.robot: RobotState = self._read_state()
@@ -196,9 +208,10 @@ class DanceEnv:
 
     # --- targets ---------------------------------------------------------------------------
     def _bank_rows(self, *ahead_steps: int) -> torch.Tensor:
-        """(N, K, C) the bank's rows [paws | body | front-lift feed-forward] at each of the K
-        ``ahead_steps`` policy steps from now (held at the sequence's end), the body scaled
-        by the curriculum: one lookup for them all."""
+        """(N, K, C) the bank's rows [paws | body | feed-forward | observation part] at each
+        of the K ``ahead_steps`` policy steps from now (held at the sequence's end): one
+        lookup for them all. Under the curriculum's scale: [paws | scaled body | its
+        feed-forward], made again."""
         ahead = self._ahead.get(ahead_steps)
         if ahead is None:
             with torch.inference_mode(False):  # usable in and out of inference mode
@@ -209,7 +222,12 @@ class DanceEnv:
         if self.curriculum_scale == 1.0:
             return rows
         scaled = rows[..., BODY] * self.curriculum_scale
-        return torch.cat([rows[..., PAWS], scaled, rows[..., BODY.stop :]], dim=2)
+        rows = torch.cat([rows[..., PAWS], scaled], dim=2)
+        ff = self._feedforward_of(rows.reshape(-1, rows.shape[2]))
+        return rows if ff is None else torch.cat([rows, ff.view(*rows.shape[:2], -1)], dim=2)
+
+    def _feedforward_of(self, rows: torch.Tensor) -> torch.Tensor | None:
+        return row_feedforward(rows, self.feedforward, self.body_feedforward)
 
     @property
     def curriculum_scale(self) -> float:
@@ -227,13 +245,16 @@ class DanceEnv:
         """This step's target rows at each of `_row_steps`, looked up at the first read after
         the time or the sequence changed."""
         if self._rows is None:
-            rows = self._bank_rows(*self._row_steps)
-            at = lambda cols: dict(zip(self._row_steps, rows[..., cols].unbind(1), strict=True))  # noqa: E731
+            whole = self.curriculum_scale == 1.0
+            steps = self._row_steps if whole else self._row_steps_scaled
+            rows = self._bank_rows(*steps)
+            at = lambda cols: dict(zip(steps, rows[..., cols].unbind(1), strict=True))  # noqa: E731
             self._rows = _StepRows(
                 at(slice(0, BODY.stop)),
                 at(PAWS),
                 at(BODY),
-                at(slice(BODY.stop, None)) if self.feedforward is not None else None,
+                at(self._ff_cols) if self._ff_cols is not None else None,
+                rows[:, 0, self._obs_cols] if whole else None,
             )
         return self._rows
 
@@ -242,13 +263,13 @@ class DanceEnv:
         row = self._rows_now().full.get(ahead_steps)
         return row if row is not None else self._bank_rows(ahead_steps)[:, 0, : BODY.stop]
 
-    def lift_feedforward(self, ahead_steps: int) -> torch.Tensor | None:
-        """(N, 12) the front-lift feed-forward of `targets_at` ``ahead_steps``; None without."""
-        lift = self._rows_now().lift
-        if lift is None:
+    def feedforward_at(self, ahead_steps: int) -> torch.Tensor | None:
+        """(N, 12) `row_feedforward` of the target row ``ahead_steps`` from now; None without."""
+        ff = self._rows_now().ff
+        if ff is None:
             return None
-        row = lift.get(ahead_steps)
-        return row if row is not None else self._bank_rows(ahead_steps)[:, 0, BODY.stop :]
+        row = ff.get(ahead_steps)
+        return row if row is not None else self._bank_rows(ahead_steps)[:, 0, self._ff_cols]
 
     def targets_at(self, ahead_steps: int) -> torch.Tensor:
         """(N, 4) paw targets `ahead_steps` policy steps from now (held at the sequence's end)."""
@@ -279,7 +300,9 @@ class DanceEnv:
         critic's there."""
         prop = self._proprio()
         self._last_proprio = prop  # the next step's history frame
-        actor = self.actor_obs.build(prop, self.targets_at, self.body_targets_at)
+        actor = self.actor_obs.build(
+            prop, self.targets_at, self.body_targets_at, self._rows_now().obs
+        )
         groups = {"actor": actor}
         if not self.compute_rewards:
             return groups
