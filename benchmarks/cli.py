@@ -541,6 +541,7 @@ def bench_deploy_cmd(
             f"{name}: front MAE dance {100 * d['front_mae_mean_m']:.2f} cm, deploy sim "
             f"{100 * (s['front_mae_mean_m'] or float('nan')):.2f} cm; falls {d['falls']} / "
             f"{s['falls']}; tick ms {s['tick_ms']}"
+            + ("" if s["final_state"] == "done" else f"; ENDED IN {s['final_state']}: {s['why']}")
         )
     print(
         "time to damp: "

@@ -108,6 +108,9 @@ def _compare(policy, song: Path, seconds: float, backend: str, log) -> tuple[dic
         )
     }
     deploy_res["front_mae_mean_m"] = _mean_mae(dep["front"])
+    # Why the run ended where it did not finish the dance (the first damping's reason).
+    damp = [e for e in dep["events"] if e["to"] == "damp"]
+    deploy_res["why"] = f"{damp[0]['reason']} at {damp[0]['t_s']:.2f} s" if damp else None
     return {
         "seconds": n / policy.task.policy_hz,
         "dance": dance_res,

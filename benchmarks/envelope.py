@@ -21,6 +21,7 @@ from typing import Any
 
 from quaddance.fileio import atomic_path, write_json
 from quaddance.play.evaluate import EvalSettings, evaluate_items, summarize
+from quaddance.play.policy import policy_label
 from quaddance.play.rollout import PinnedDynamics
 
 #: The four hard ends of the training ranges at once (FACTS.md section 2 / DomainRandCfg).
@@ -161,7 +162,7 @@ def run_envelope(
         }
     return {
         "items": [p.name for p in items],
-        "policy": str(policy) if policy else "shipped",
+        "policy": policy_label(policy),
         "push_schedule": {
             "first_s": PinnedDynamics().push_first_s,
             "every_s": PinnedDynamics().push_every_s,

@@ -236,7 +236,7 @@ def test_bench_deploy_robot_runs_that_backend_with_its_robots_policy(tmp_path, m
 
     def compare(policy, song, seconds, backend, log):
         ran.append((policy.robot.name, backend))
-        run = {"front_mae_mean_m": 0.002, "falls": 0, "tick_ms": {}}
+        run = {"front_mae_mean_m": 0.002, "falls": 0, "tick_ms": {}, "final_state": "done"}
         return {"dance": run, "deploy_sim": run}, "the demo's dance"
 
     def deploy(policy, dance, seconds, backend, inject=()):

@@ -268,3 +268,12 @@ def test_deploy_sim_simulates_the_policys_robot():
     assert [r.cfg.robot for r in made] == [GO2.name, GO1.name]  # not started: no process
     with pytest.raises(QuaddanceError, match="drives a Go1"):
         make_robot(BackendOptions(robot="go1"), GO2)
+
+
+def test_reports_name_a_shipped_policy_by_its_file_not_this_machines_path(tmp_path):
+    from quaddance.play.policy import policy_label
+
+    assert policy_label(shipped_policy_path(GO2)) == "shipped (go2_dance.onnx)"
+    assert policy_label(None) == "shipped (go1_dance.onnx)"
+    mine = tmp_path / "go1_dance.onnx"  # the same name elsewhere is the user's own
+    assert policy_label(mine) == str(mine)

@@ -15,6 +15,7 @@ import numpy as np
 
 from quaddance.errors import QuaddanceError
 from quaddance.fileio import atomic_path, write_json
+from quaddance.play.policy import policy_label
 from quaddance.play.rollout import PinnedDynamics
 
 AUDIO_EXT = {".wav", ".flac", ".ogg", ".mp3"}
@@ -149,7 +150,7 @@ def evaluate(
 def settings_dict(settings: EvalSettings, policy: Path | None) -> dict[str, Any]:
     """JSON-ready settings of an evaluation."""
     d = dataclasses.asdict(settings)
-    d["policy"] = str(policy) if policy else "shipped"
+    d["policy"] = policy_label(policy)
     d["description"] = settings.describe()
     return d
 
@@ -246,7 +247,7 @@ def markdown_report(
         f"{_num(s['realtime_factor_sim'], 1, 1)} |"
     )
     return (
-        f"# {title or 'quaddance evaluation'}\n\npolicy: `{policy or 'shipped'}`, "
+        f"# {title or 'quaddance evaluation'}\n\npolicy: `{policy_label(policy)}`, "
         f"{len(rows)} items; {settings.describe()}. MAE/corr per front foot; *feas.* = the "
         "feasible part of the targets (see `quaddance.play.metrics`); BAS needs music beats "
         "(none for a motion file alone); trunk: measured pose vs the body targets (height in "

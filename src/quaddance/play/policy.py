@@ -14,10 +14,25 @@ from quaddance.robots import GO1, RobotCfg, get_robot
 from quaddance.sim.config import DanceTaskCfg
 
 
+def _shipped_dir() -> Path:
+    return Path(str(resources.files("quaddance") / "data" / "policies"))
+
+
+def policy_label(policy: str | Path | None) -> str:
+    """How reports name a policy: a shipped one as ``shipped (FILE)`` (not the path of this
+    machine's install), another by the path it was given as; None is the shipped Go1's."""
+    if policy is None:
+        return f"shipped ({GO1.policy})"
+    path = Path(policy)
+    if path.parent.resolve() == _shipped_dir().resolve():
+        return f"shipped ({path.name})"
+    return str(path)
+
+
 def shipped_policy_path(robot: RobotCfg = GO1) -> Path:
     """The policy for ``robot`` that ships with the package (trained with `quaddance train`);
     one line naming the robot and the path where the package has none."""
-    path = Path(str(resources.files("quaddance") / "data" / "policies" / robot.policy))
+    path = _shipped_dir() / robot.policy
     if not path.is_file():
         raise QuaddanceError(
             f"no {robot.short_name} policy ships with this quaddance ({path} is missing); "
