@@ -25,6 +25,7 @@ from quaddance.sim.state import (
     quat_sums,
     rpy_from_sums,
     state_from_arrays,
+    yaw_from_sums,
 )
 from quaddance.sim.task import DanceEnv, sample_dynamics
 
@@ -143,6 +144,7 @@ def test_gravity_and_angles_from_one_pass_over_the_quaternion_match_scipy():
     # Extrinsic x-y-z (R = R_z R_y R_x): scipy's intrinsic "ZYX" read backwards.
     yaw_pitch_roll = rot.as_euler("ZYX")
     np.testing.assert_allclose(rpy_from_sums(sums).numpy(), yaw_pitch_roll[:, ::-1], atol=1e-9)
+    assert torch.equal(yaw_from_sums(sums), rpy_from_sums(sums)[:, 2])  # the runner's heading
 
 
 def test_projected_gravity_upright_pitched_and_upside_down():

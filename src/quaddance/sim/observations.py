@@ -28,8 +28,8 @@ from quaddance.sim.state import (
     RobotState,
     gravity_from_sums,
     quat_sums,
-    rpy_from_sums,
     wrap_angle_rad,
+    yaw_from_sums,
 )
 
 
@@ -63,7 +63,7 @@ class Measurement:
         """From the IMU's orientation quaternion (N, 4; w, x, y, z) as a Go1 reports it;
         ``heading_zero_rad`` is the IMU yaw when the dance began."""
         sums = quat_sums(quat_wxyz)
-        heading = wrap_angle_rad(rpy_from_sums(sums)[:, 2] - heading_zero_rad)
+        heading = wrap_angle_rad(yaw_from_sums(sums) - heading_zero_rad)
         return cls(
             gravity_from_sums(sums),
             gyro_rad_s,

@@ -236,9 +236,14 @@ def rpy_from_sums(sums: torch.Tensor) -> torch.Tensor:
     return torch.where(c.is_pitch, num.clamp(-1.0, 1.0).asin(), torch.atan2(num, den))
 
 
+def yaw_from_sums(sums: torch.Tensor) -> torch.Tensor:
+    """(N,) `rpy_from_sums`' yaw alone (the robot runner's heading needs no more)."""
+    return torch.atan2(sums[:, 2], scalar_tensor(1.0, sums) - sums[:, 5])
+
+
 def yaw_from_quat(quat_wxyz: torch.Tensor) -> torch.Tensor:
     """(N,) yaw (heading about the world vertical, rad) of (N, 4) w x y z quaternions."""
-    return rpy_from_sums(quat_sums(quat_wxyz))[:, 2]
+    return yaw_from_sums(quat_sums(quat_wxyz))
 
 
 def wrap_angle_rad(angle: torch.Tensor) -> torch.Tensor:
