@@ -188,7 +188,8 @@ def bench_beats_cmd(
     on). Needs fluidsynth and a General MIDI soundfont (apt-get install fluidsynth
     fluid-soundfont-gm); renderings are cached under benchmarks/cache/. "real" scores the
     real-music set (benchmarks/real_music: band recordings and MIDI songs made elsewhere,
-    tuning and held-out parts) offline, online (after the lock) and with librosa.
+    tuning and held-out parts) offline, online (after the lock), with librosa and with
+    BeatNet's published networks (CC BY 4.0) decoded by a bar-pointer HMM.
     """
     from rich.console import Console
     from rich.table import Table
@@ -233,8 +234,8 @@ def bench_beats_cmd(
 def _bench_real_beats(
     out: Path, madmom_python: Path | None, console: Any, report: Path | None
 ) -> None:
-    """``bench beats --sets real``: the real-music set, offline, online and librosa (and
-    madmom); the markdown report to ``report``."""
+    """``bench beats --sets real``: the real-music set, offline, online, librosa and BeatNet
+    (and madmom); the markdown report to ``report``."""
     from rich.console import Console
     from rich.table import Table
 
@@ -248,7 +249,7 @@ def _bench_real_beats(
             madmom_python=None if madmom_python is None else str(madmom_python),
             progress=lambda name: status.update(f"Scoring {name}..."),
         )
-    trackers = ["offline", "online", "librosa"]
+    trackers = ["offline", "online", "librosa", "beatnet"]
     if madmom_python is not None:
         trackers += ["madmom_dbn", "madmom_online"]
     table = Table(title="real music, beat F (+-70 ms): strict / at the tracker's metrical level")

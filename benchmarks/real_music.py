@@ -548,6 +548,18 @@ def _librosa_beats_s(y: np.ndarray, sr: int) -> np.ndarray:
     return librosa.frames_to_time(frames, sr=sr)
 
 
+def beatnet_beats_s(y: np.ndarray, sr: int) -> tuple[np.ndarray, np.ndarray]:
+    """(beats, downbeats) in seconds by BeatNet's networks (`benchmarks.beatnet`, the mean of
+    its three) decoded by the bar-pointer model with madmom's settings (`benchmarks.bar_hmm`):
+    the field's learned tracker under a licence that allows any use (CC BY 4.0)."""
+    from benchmarks.bar_hmm import decode
+    from benchmarks.beatnet import FPS, beat_activation
+
+    out = decode(beat_activation(y, sr), FPS)
+    beats_s = out.beat_frames / FPS
+    return beats_s, beats_s[out.downbeat]
+
+
 def _scores(prefix: str, ref_s: np.ndarray, est_s: np.ndarray) -> dict[str, float]:
     from benchmarks.beats import (
         F_MEASURE_WINDOW_S,
@@ -581,9 +593,10 @@ def _downbeat_f(song: RealSong, est_s: np.ndarray, start_s: float = 0.0) -> floa
 def score_song(song: RealSong, madmom: dict[str, np.ndarray] | None = None) -> dict[str, Any]:
     """Strict and metrical-level F (+-70 ms) of each tracker on ``song``, and more.
 
-    Offline: ``analyze`` (what ``quaddance analyze`` runs) and librosa's ``beat_track`` over
-    the whole song. Online: the ``OnlineBeatTracker`` fed the file block by block at full
-    speed (`track_file`, decoded as ``live --from-file`` decodes it); ``lock_s`` is its first
+    Offline: ``analyze`` (what ``quaddance analyze`` runs), librosa's ``beat_track`` and the
+    BeatNet tracker (`beatnet_beats_s`) over the whole song. Online: the ``OnlineBeatTracker``
+    fed the file block by block at full speed (`track_file`, decoded as ``live --from-file``
+    decodes it); ``lock_s`` is its first
     lock, ``f*_online`` are scored after it and ``f_metrical_online_whole`` over the song.
     ``madmom`` holds madmom's tracks (`benchmarks.beats.madmom_tracks`): its online beats are
     scored over the same span as ours (after our lock) and over the whole song.
@@ -599,6 +612,7 @@ def score_song(song: RealSong, madmom: dict[str, np.ndarray] | None = None) -> d
     offline = analyze(y, DEFAULT_SR)
     t1 = time.perf_counter()
     lib_s = _librosa_beats_s(y, DEFAULT_SR)
+    beatnet_s, beatnet_down = beatnet_beats_s(y, DEFAULT_SR)
     online = track_file(song.audio_path)
     online_s = online.beats_s
     lock_s = online.first_lock_s()
@@ -615,6 +629,8 @@ def score_song(song: RealSong, madmom: dict[str, np.ndarray] | None = None) -> d
         "f_downbeat_offline": _downbeat_f(song, offline.downbeats_s),
         "offline_beats_increasing": bool(np.all(np.diff(offline.beats_s) > 0)),
         **_scores("librosa", ref, lib_s),
+        **_scores("beatnet", ref, beatnet_s),
+        "f_downbeat_beatnet": _downbeat_f(song, beatnet_down),
         "lock_s": None if lock_s is None else round(lock_s, 3),
         **_scores("online", ref[ref >= after], online_s[online_s >= after]),
         "f_metrical_online_whole": round(metrical_level_f_measure(ref, online_s), 4),
@@ -636,7 +652,8 @@ MEAN_KEYS = (
     "f_offline", "f_metrical_offline", "f_downbeat_offline", "f_librosa", "f_metrical_librosa",
     "f_online", "f_metrical_online", "f_metrical_online_whole", "f_downbeat_online",
     "f_madmom_dbn", "f_metrical_madmom_dbn", "f_madmom_online", "f_metrical_madmom_online",
-    "f_metrical_madmom_online_whole", "f_downbeat_madmom",
+    "f_metrical_madmom_online_whole", "f_downbeat_madmom", "f_beatnet", "f_metrical_beatnet",
+    "f_downbeat_beatnet",
 )  # fmt: skip
 
 
@@ -648,7 +665,7 @@ def _means(rows: list[dict[str, Any]]) -> dict[str, Any]:
     for key in MEAN_KEYS:
         if rows and all(key in r for r in rows):
             out[key] = round(float(np.mean([r[key] for r in rows])), 4)
-    for tracker in ("offline", "online", "librosa", "madmom_dbn", "madmom_online"):
+    for tracker in ("offline", "online", "librosa", "madmom_dbn", "madmom_online", "beatnet"):
         if rows and all(f"tempo_ok_{tracker}" in r for r in rows):
             out[f"tempo_ok_{tracker}"] = sum(r[f"tempo_ok_{tracker}"] for r in rows)
     locks = [r["lock_s"] for r in rows if r["lock_s"] is not None]
@@ -738,6 +755,7 @@ REPORT_TRACKERS = (
     ("madmom_dbn", "madmom offline (RNN + DBN)"),
     ("madmom_online", "madmom online (forward RNN + online DBN), same span"),
     ("librosa", "librosa `beat_track`"),
+    ("beatnet", "BeatNet's CRNNs (CC BY 4.0) + bar-pointer HMM"),
 )
 
 
@@ -771,6 +789,15 @@ def report_md(results: dict[str, Any]) -> str:
             else "was not installed for this run (`scripts/install_madmom.sh`)."
         ),
         "",
+    ]
+    if any("f_beatnet" in m for m in means.values()):
+        lines += [
+            "BeatNet: the three published networks of Heydari, Cwitkowitz and Duan (ISMIR 2021; "
+            "weights CC BY 4.0, converted by `scripts/fetch_beatnet.py`), their mean activation "
+            "decoded by a bar-pointer HMM with madmom's settings (`benchmarks/bar_hmm.py`).",
+            "",
+        ]
+    lines += [
         "The held-out part was fixed before any tracker ran on these songs "
         "(`benchmarks/real_music/sources.toml`); the tuning part is listed last.",
         "",
@@ -789,7 +816,8 @@ def report_md(results: dict[str, Any]) -> str:
             if f"f_{key}" not in m:
                 continue
             downbeat = {"offline": "f_downbeat_offline", "online": "f_downbeat_online",
-                        "madmom_dbn": "f_downbeat_madmom"}.get(key)  # fmt: skip
+                        "madmom_dbn": "f_downbeat_madmom",
+                        "beatnet": "f_downbeat_beatnet"}.get(key)  # fmt: skip
             tempo_ok = m.get(f"tempo_ok_{key}")
             tempo = "-" if tempo_ok is None else f"{tempo_ok} of {m['n_songs']}"
             lines.append(
@@ -806,15 +834,15 @@ def report_md(results: dict[str, Any]) -> str:
         "## Songs",
         "",
         "| song | split | kind | BPM | offline | online | madmom offline | madmom online | "
-        "librosa | lock s |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "librosa | BeatNet | lock s |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in results["songs"]:
         bpm = r["true_tempo_bpm"]
         bpm_text = f"{bpm:g}" if isinstance(bpm, float) else f"{bpm[0]:g}-{bpm[1]:g}"
         cells = [
             "-" if f"f_{k}" not in r else f"{r[f'f_{k}']:.2f} / {r[f'f_metrical_{k}']:.2f}"
-            for k in ("offline", "online", "madmom_dbn", "madmom_online", "librosa")
+            for k in ("offline", "online", "madmom_dbn", "madmom_online", "librosa", "beatnet")
         ]
         lines.append(
             f"| {r['name']} | {r['split']} | {r['kind']} | {bpm_text} | "
