@@ -17,6 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from quaddance.music.analysis import peak_vertex
+
 
 @dataclass(frozen=True)
 class DecoderConfig:
@@ -130,7 +132,7 @@ def state_space(fps: float, cfg: DecoderConfig = DecoderConfig()) -> BarStateSpa
     )
 
 
-def log_observation(space: BarStateSpace, act: np.ndarray, cfg: DecoderConfig) -> np.ndarray:
+def log_observation(act: np.ndarray, cfg: DecoderConfig) -> np.ndarray:
     """(n, 3) log densities of the three kinds of state (downbeat, other beat, no beat) for
     (n, 2) activations (P(beat), P(downbeat)); ``state_kind`` says which kind a state is."""
     eps = 1e-7
@@ -154,7 +156,6 @@ class Decoded:
     beat_frames: np.ndarray  # (n_beats,) increasing frames, fractional (the peak's vertex)
     downbeat: np.ndarray  # (n_beats,) bool
     beats_per_bar: int
-    interval_frames: np.ndarray  # (n_beats,) the path's beat interval at each beat
 
 
 def decode(act: np.ndarray, fps: float, cfg: DecoderConfig = DecoderConfig()) -> Decoded:
@@ -166,10 +167,10 @@ def decode(act: np.ndarray, fps: float, cfg: DecoderConfig = DecoderConfig()) ->
     act = np.asarray(act, dtype=np.float64)
     space = state_space(fps, cfg)
     kind = state_kind(space)
-    obs = log_observation(space, act, cfg)
+    obs = log_observation(act, cfg)
     n = len(act)
     if n == 0:
-        return Decoded(np.zeros(0), np.zeros(0, bool), max(cfg.beats_per_bar), np.zeros(0))
+        return Decoded(np.zeros(0), np.zeros(0, bool), max(cfg.beats_per_bar))
     # Uniform start over all states.
     delta = obs[0][kind] - np.log(space.n_states)
     back = np.empty((n, len(space.beat_start)), dtype=np.int16)
@@ -200,24 +201,12 @@ def _beats_of_path(space: BarStateSpace, path: np.ndarray, act: np.ndarray) -> D
     # Runs of frames inside one beat region: a new run starts where the path enters one.
     starts = np.flatnonzero(in_beat & ~np.concatenate([[False], in_beat[:-1]]))
     strength = act.sum(axis=1)
-    frames, down, ivl = [], [], []
+    frames, down = [], []
     for s in starts:
         e = s
         while e + 1 < len(path) and in_beat[e + 1]:
             e += 1
-        frames.append(_vertex(strength, s + int(np.argmax(strength[s : e + 1]))))
+        frames.append(peak_vertex(strength, s + int(np.argmax(strength[s : e + 1]))))
         down.append(space.beat_index[path[s]] == 0)
-        ivl.append(space.interval[path[s]])
     meter = int(space.meters[np.searchsorted(space.block_start, path[-1], "right") - 1])
-    return Decoded(np.array(frames, float), np.array(down, bool), meter, np.array(ivl, float))
-
-
-def _vertex(x: np.ndarray, j: int) -> float:
-    """Frame ``j`` moved to the vertex of the parabola through x[j - 1 : j + 2] where x[j] is a
-    peak (within half a frame of it), else ``j``: beats finer than the 20 ms frames."""
-    if 0 < j < len(x) - 1:
-        y0, y1, y2 = x[j - 1], x[j], x[j + 1]
-        denom = y0 - 2.0 * y1 + y2
-        if y1 >= max(y0, y2) and denom < 0:
-            return j + 0.5 * (y0 - y2) / denom
-    return float(j)
+    return Decoded(np.array(frames, float), np.array(down, bool), meter)

@@ -9,7 +9,6 @@ Usage: .venv/bin/python scripts/beatnet_reference.py
 
 from __future__ import annotations
 
-import io
 import subprocess
 import sys
 import tempfile
@@ -42,28 +41,11 @@ np.save(sys.argv[2], np.asarray(pipe(y), dtype=np.float32))
 """
 
 
-def _torch_activation(state: dict, feats: np.ndarray) -> np.ndarray:
-    """BeatNet's BDA forward pass, with torch's own layers (conv, pool, LSTM, softmax)."""
-    import torch
-    from torch.nn import functional
-
-    x = torch.from_numpy(feats)[:, None, :]
-    x = functional.conv1d(x, state["conv1.weight"], state["conv1.bias"])
-    x = functional.max_pool1d(functional.relu(x), 2)
-    x = functional.linear(x.reshape(len(feats), -1), state["linear0.weight"], state["linear0.bias"])
-    lstm = torch.nn.LSTM(150, 150, num_layers=2, batch_first=True)
-    lstm.load_state_dict({k[5:]: v for k, v in state.items() if k.startswith("lstm.")})
-    with torch.no_grad():
-        out, _ = lstm(x[None])
-        logits = functional.linear(out[0], state["linear.weight"], state["linear.bias"])
-        return torch.softmax(logits, dim=1)[:, :2].numpy()
-
-
 def main() -> None:
     import torch
 
     sys.path.insert(0, str(ROOT / "scripts"))
-    from fetch_beatnet import _wheel
+    from fetch_beatnet import MODELS, _ensemble, _states, _wheel
 
     from quaddance.music.synth import render_song
 
@@ -77,11 +59,14 @@ def main() -> None:
         )
         feats = np.load(Path(tmp) / "f.npy")
         with zipfile.ZipFile(_wheel(Path(tmp))) as whl:
-            acts = {}
-            for n in (1, 2, 3):
-                raw = whl.read(f"BeatNet/models/model_{n}_weights.pt")
-                state = torch.load(io.BytesIO(raw), map_location="cpu", weights_only=True)
-                acts[f"activation_{n}"] = _torch_activation(state, feats)
+            states = _states(whl)
+    # Each network alone, run by torch (the ONNX file runs them together).
+    acts = {}
+    zeros = torch.zeros(1, 2, 1, 150)
+    with torch.no_grad():
+        for n, state in zip(MODELS, states, strict=True):
+            probs, _, _ = _ensemble([state])(torch.from_numpy(feats), zeros, zeros)
+            acts[f"activation_{n}"] = probs.numpy()
     np.savez_compressed(OUT, audio=y, features=feats, beats_s=truth.beats_s, **acts)
     print(f"wrote {OUT} ({OUT.stat().st_size / 1e3:.0f} kB)")
 

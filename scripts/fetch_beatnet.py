@@ -55,6 +55,20 @@ def _wheel(dest: Path) -> Path:
     return path
 
 
+def _states(whl: zipfile.ZipFile) -> list[dict]:
+    """BeatNet's state dicts of `MODELS` from its wheel, read with ``weights_only=True``."""
+    import torch
+
+    return [
+        torch.load(
+            io.BytesIO(whl.read(f"BeatNet/models/model_{n}_weights.pt")),
+            map_location="cpu",
+            weights_only=True,
+        )
+        for n in MODELS
+    ]
+
+
 def _ensemble(states: list[dict]):
     """A torch module with BeatNet's ``BDA`` forward pass for each state dict: conv (2 x 10
     over the 272 features), ReLU, max-pool 2, linear to 150, a 2-layer LSTM of 150 cells,
@@ -99,11 +113,7 @@ def main(argv: list[str] | None = None) -> None:
         licence = whl.read(f"BeatNet-{VERSION}.dist-info/LICENSE").decode()
         (OUT / "LICENSE.txt").write_text(licence)
         (OUT / "ATTRIBUTION.txt").write_text(ATTRIBUTION)
-        states = []
-        for n in MODELS:
-            raw = whl.read(f"BeatNet/models/model_{n}_weights.pt")
-            states.append(torch.load(io.BytesIO(raw), map_location="cpu", weights_only=True))
-    model = _ensemble(states)
+        model = _ensemble(_states(whl))
     state_shape = (len(MODELS), 2, 1, 150)
     args = (torch.zeros(50, 272), torch.zeros(state_shape), torch.zeros(state_shape))
     out = OUT / "beatnet_ensemble.onnx"

@@ -550,21 +550,26 @@ def backbeat_heard(hits: np.ndarray, cfg: AnalysisConfig) -> bool:
     return mid >= cfg.backbeat_ratio * beat and mid >= cfg.backbeat_contrast * max(q1, q3)
 
 
+def peak_vertex(x: np.ndarray, j: int) -> float:
+    """Frame ``j`` of ``x`` moved to the vertex of the parabola through it and its neighbours
+    where it is a peak (the vertex then lies within half a frame), else ``j`` itself."""
+    if 0 < j < len(x) - 1:
+        y0, y1, y2 = x[j - 1], x[j], x[j + 1]
+        denom = y0 - 2 * y1 + y2
+        if y1 >= max(y0, y2) and denom < 0:
+            return j + 0.5 * (y0 - y2) / denom
+    return float(j)
+
+
 def _refine(beats: np.ndarray, onset: np.ndarray, radius: int = 1) -> np.ndarray:
     """Sub-frame beat positions: the highest onset frame within ``radius`` of each beat frame,
-    moved to the vertex of the parabola through it and its neighbours where it is a peak (the
-    vertex then lies within half a frame; on a slope it can lie anywhere, past the next beat)."""
+    at its `peak_vertex` (on a slope it stays on the frame; at a peak it moves by at most half
+    a frame)."""
     out = beats.astype(float)
     n = len(onset)
     for i, b in enumerate(beats):
         a, c = max(0, b - radius), min(n - 1, b + radius)
-        j = a + int(np.argmax(onset[a : c + 1]))
-        out[i] = j
-        if 0 < j < n - 1:
-            y0, y1, y2 = onset[j - 1], onset[j], onset[j + 1]
-            denom = y0 - 2 * y1 + y2
-            if y1 >= max(y0, y2) and denom < 0:
-                out[i] = j + 0.5 * (y0 - y2) / denom
+        out[i] = peak_vertex(onset, a + int(np.argmax(onset[a : c + 1])))
     return out
 
 
