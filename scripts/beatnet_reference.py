@@ -9,6 +9,7 @@ Usage: .venv/bin/python scripts/beatnet_reference.py
 
 from __future__ import annotations
 
+import argparse
 import subprocess
 import sys
 import tempfile
@@ -41,7 +42,10 @@ np.save(sys.argv[2], np.asarray(pipe(y), dtype=np.float32))
 """
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args(argv)
+    if not MADMOM_PYTHON.is_file():
+        raise SystemExit(f"no madmom at {MADMOM_PYTHON}: run `bash scripts/install_madmom.sh`")
     import torch
 
     sys.path.insert(0, str(ROOT / "scripts"))
