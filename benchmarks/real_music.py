@@ -596,8 +596,8 @@ def score_song(song: RealSong, madmom: dict[str, np.ndarray] | None = None) -> d
     Offline: ``analyze`` (what ``quaddance analyze`` runs), librosa's ``beat_track`` and the
     BeatNet tracker (`beatnet_beats_s`) over the whole song. Online: the ``OnlineBeatTracker``
     fed the file block by block at full speed (`track_file`, decoded as ``live --from-file``
-    decodes it); ``lock_s`` is its first
-    lock, ``f*_online`` are scored after it and ``f_metrical_online_whole`` over the song.
+    decodes it); ``lock_s`` is its first lock, ``f*_online`` are scored after it and
+    ``f_metrical_online_whole`` over the song.
     ``madmom`` holds madmom's tracks (`benchmarks.beats.madmom_tracks`): its online beats are
     scored over the same span as ours (after our lock) and over the whole song.
     """
@@ -665,7 +665,7 @@ def _means(rows: list[dict[str, Any]]) -> dict[str, Any]:
     for key in MEAN_KEYS:
         if rows and all(key in r for r in rows):
             out[key] = round(float(np.mean([r[key] for r in rows])), 4)
-    for tracker in ("offline", "online", "librosa", "madmom_dbn", "madmom_online", "beatnet"):
+    for tracker, _ in REPORT_TRACKERS:
         if rows and all(f"tempo_ok_{tracker}" in r for r in rows):
             out[f"tempo_ok_{tracker}"] = sum(r[f"tempo_ok_{tracker}"] for r in rows)
     locks = [r["lock_s"] for r in rows if r["lock_s"] is not None]
@@ -842,7 +842,7 @@ def report_md(results: dict[str, Any]) -> str:
         bpm_text = f"{bpm:g}" if isinstance(bpm, float) else f"{bpm[0]:g}-{bpm[1]:g}"
         cells = [
             "-" if f"f_{k}" not in r else f"{r[f'f_{k}']:.2f} / {r[f'f_metrical_{k}']:.2f}"
-            for k in ("offline", "online", "madmom_dbn", "madmom_online", "librosa", "beatnet")
+            for k, _ in REPORT_TRACKERS
         ]
         lines.append(
             f"| {r['name']} | {r['split']} | {r['kind']} | {bpm_text} | "
