@@ -171,7 +171,8 @@ def bench_beats_cmd(
         typer.Option(
             help="Comma-separated sets to score: tuning, random, untuned (MIDI songs written "
             "here), real (music made by people elsewhere, benchmarks/real_music: its results "
-            "go to OUT with _real added to the name)."
+            "go to OUT with _real added to the name), real-lmms (LMMS's demo songs, "
+            "benchmarks/real_music_lmms, once built: results to OUT with _real_lmms added)."
         ),
     ] = "tuning,random,untuned",
     madmom_python: MadmomPython = None,
@@ -189,7 +190,9 @@ def bench_beats_cmd(
     fluid-soundfont-gm); renderings are cached under benchmarks/cache/. "real" scores the
     real-music set (benchmarks/real_music: band recordings and MIDI songs made elsewhere,
     tuning and held-out parts) offline, online (after the lock), with librosa and with
-    BeatNet's published networks (CC BY 4.0) decoded by a bar-pointer HMM.
+    BeatNet's published networks (CC BY 4.0) decoded by a bar-pointer HMM. "real-lmms" scores
+    the same way the demo songs of LMMS, rendered by LMMS (build them first: apt-get install
+    lmms; python -m benchmarks.real_music build --root benchmarks/real_music_lmms).
     """
     from rich.console import Console
     from rich.table import Table
@@ -199,11 +202,22 @@ def bench_beats_cmd(
     console = Console(stderr=True)
     madmom_python = _madmom_python(madmom_python, no_madmom, console)
     chosen = tuple(s.strip() for s in sets.split(",") if s.strip())
-    if "real" in chosen:
-        _bench_real_beats(out, madmom_python, console, report)
-        chosen = tuple(s for s in chosen if s != "real")
-        if not chosen:
-            return
+    from benchmarks.real_music import LMMS_ROOT, ROOT
+
+    real_sets = {"real": (ROOT, "_real"), "real-lmms": (LMMS_ROOT, "_real_lmms")}
+    for name, (root, suffix) in real_sets.items():
+        if name in chosen:
+            real_out = out.with_name(f"{out.stem}{suffix}{out.suffix}")
+            # One report per set: the second set's goes beside the first's.
+            to = (
+                report
+                if report is None or name == "real" or "real" not in chosen
+                else (report.with_name(f"{report.stem}_lmms{report.suffix}"))
+            )
+            _bench_real_beats(real_out, root, madmom_python, console, to)
+    chosen = tuple(s for s in chosen if s not in real_sets)
+    if not chosen:
+        return
     with console.status("Scoring beats...") as status:
         results = run_beat_bench(
             out,
@@ -232,20 +246,25 @@ def bench_beats_cmd(
 
 
 def _bench_real_beats(
-    out: Path, madmom_python: Path | None, console: Any, report: Path | None
+    real_out: Path, root: Path, madmom_python: Path | None, console: Any, report: Path | None
 ) -> None:
-    """``bench beats --sets real``: the real-music set, offline, online, librosa and BeatNet
-    (and madmom); the markdown report to ``report``."""
+    """``bench beats --sets real`` (or ``real-lmms``): the real-music set under ``root``,
+    offline, online, librosa and BeatNet (and madmom); the markdown report to ``report``."""
     from rich.console import Console
     from rich.table import Table
 
-    from benchmarks.real_music import report_md, run_real_bench
+    from benchmarks.real_music import load_manifest, report_md, run_real_bench
+    from quaddance.errors import QuaddanceError
     from quaddance.fileio import atomic_path
 
-    real_out = out.with_name(f"{out.stem}_real{out.suffix}")
+    try:
+        load_manifest(root)
+    except FileNotFoundError as e:
+        raise QuaddanceError(str(e)) from None
     with console.status("Scoring beats on real music...") as status:
         results = run_real_bench(
             real_out,
+            root,
             madmom_python=None if madmom_python is None else str(madmom_python),
             progress=lambda name: status.update(f"Scoring {name}..."),
         )

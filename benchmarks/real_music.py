@@ -53,6 +53,9 @@ import numpy as np
 MODULE = "benchmarks.real_music"
 """This module's name, for the commands it prints (``__name__`` is ``__main__`` under -m)."""
 ROOT = Path(__file__).resolve().parent / "real_music"
+LMMS_ROOT = Path(__file__).resolve().parent / "real_music_lmms"
+"""The LMMS part: songs rendered by LMMS when built (``build --root``), not committed (its
+audio would pass the set's 50 MB); only its sources and licences are."""
 """The set's folder: ``manifest.json``, ``audio/``, ``beats/``, ``LICENCES.md``."""
 MANIFEST_NAME = "manifest.json"
 SPLITS = ("tuning", "heldout")
@@ -63,12 +66,16 @@ OGG_QUALITY = 0.5
 SILENCE_DB = -40.0
 """Beats are kept from where the music is first louder than this, dB below the song's peak
 (50 ms RMS frames), to where it last is: there is nothing to hear before and after."""
-KINDS = ("recording", "midi_render")
+KINDS = ("recording", "midi_render", "lmms_render")
 
 LICENCES = {
     "CC-BY-SA-3.0": "https://creativecommons.org/licenses/by-sa/3.0/",
     "MIT": "https://opensource.org/license/mit",
     "GPL-2.0": "https://www.gnu.org/licenses/old-licenses/gpl-2.0.html",
+    "GPL-2.0-or-later": "https://www.gnu.org/licenses/old-licenses/gpl-2.0.html",
+    "Artistic-2.0": "https://opensource.org/license/artistic-2-0",
+    "CC-BY-SA-4.0": "https://creativecommons.org/licenses/by-sa/4.0/",
+    "BSD-2-Clause": "https://opensource.org/license/bsd-2-clause",
 }
 
 
@@ -78,7 +85,7 @@ class SongSource:
 
     name: str
     package: str  # Debian package
-    path: str  # the song's folder (recording) or MIDI file (midi_render) in the package
+    path: str  # the song's folder (recording), MIDI file or LMMS project in the package
     title: str
     artist: str
     licence: str  # a key of LICENCES
@@ -87,6 +94,8 @@ class SongSource:
 
     @property
     def kind(self) -> str:
+        if self.path.endswith((".mmp", ".mmpz")):
+            return "lmms_render"
         return "midi_render" if self.path.endswith(".mid") else "recording"
 
 
@@ -96,13 +105,23 @@ SOURCES_NAME = "sources.toml"
 
 def read_sources(root: Path = ROOT) -> tuple[tuple[SongSource, ...], str]:
     """The songs of ``sources.toml`` and the reason given for their split."""
-    import tomllib
-
-    with open(root / SOURCES_NAME, "rb") as f:
-        table = tomllib.load(f)
+    table = _sources_table(root)
     return tuple(SongSource(**song) for song in table["song"]), " ".join(
         table["split_reason"].split()
     )
+
+
+def _rel(root: Path) -> str:
+    """``root`` as the repository names it (benchmarks/...), else as given."""
+    top = ROOT.parent.parent
+    return str(root.resolve().relative_to(top)) if root.resolve().is_relative_to(top) else str(root)
+
+
+def _sources_table(root: Path) -> dict[str, Any]:
+    import tomllib
+
+    with open(root / SOURCES_NAME, "rb") as f:
+        return tomllib.load(f)
 
 
 @dataclass
@@ -134,7 +153,9 @@ def load_manifest(root: Path = ROOT) -> dict[str, Any]:
     """The manifest of the set under ``root`` (``build`` writes it)."""
     path = root / MANIFEST_NAME
     if not path.is_file():
-        raise FileNotFoundError(f"no real-music manifest at {path}: run `python -m {MODULE} build`")
+        build = f"python -m {MODULE} build" + ("" if root == ROOT else f" --root {_rel(root)}")
+        need = f"{LMMS_INSTALL_HINT}; " if root == LMMS_ROOT else ""
+        raise FileNotFoundError(f"no real-music manifest at {path}: run `{need}{build}`")
     return json.loads(path.read_text())
 
 
@@ -245,6 +266,58 @@ def read_tempo_map(midi_path: Path) -> TempoMap:
     tempos.setdefault(0, 120.0)  # MIDI's tempo until the first tempo event
     ticks = tuple(sorted(tempos))
     return TempoMap(midi.ticks_per_beat, ticks, tuple(tempos[t] for t in ticks), beats_per_bar)
+
+
+LMMS_TICKS_PER_BEAT = 48
+"""LMMS's tick resolution: 192 ticks per 4/4 bar, a beat (quarter note) of 48."""
+
+
+def read_lmms_tempo_map(project: Path) -> TempoMap:
+    """The tempo map of an LMMS project (``.mmp``, or ``.mmpz``: Qt's qCompress, a 4-byte
+    length then zlib): its head's tempo and meter.
+
+    Raises:
+        ValueError: the file is not an LMMS project, or its tempo is automated (these songs
+            have one tempo each; an automated one would need its automation read).
+    """
+    import xml.etree.ElementTree as ET
+    import zlib
+
+    data = project.read_bytes()
+    try:
+        xml = zlib.decompress(data[4:]) if project.suffix == ".mmpz" else data
+        head = ET.fromstring(xml).find("head")
+    except (zlib.error, ET.ParseError) as e:
+        raise ValueError(f"{project}: not an LMMS project ({e})") from None
+    if head is None or head.get("bpm") is None:
+        raise ValueError(f"{project}: not an LMMS project (no <head bpm=...>)")
+    if head.find("bpm") is not None:
+        raise ValueError(f"{project}: its tempo is automated; only a fixed tempo is read")
+    numerator = int(head.get("timesig_numerator", 4))
+    denominator = int(head.get("timesig_denominator", 4))
+    # Beats are quarter notes whatever the meter: 1/1 has bars of 4, 8/4 bars of 8.
+    per_bar = max(1, numerator * 4 // denominator)
+    return TempoMap(LMMS_TICKS_PER_BEAT, (0,), (float(head.get("bpm")),), per_bar)
+
+
+LMMS_INSTALL_HINT = "apt-get install lmms"
+
+
+def render_lmms(project: Path, wav: Path, timeout_s: float = 600.0) -> None:
+    """Render an LMMS project to a wav file with LMMS itself, with no display."""
+    import os
+    import shutil
+
+    lmms = shutil.which("lmms")
+    if lmms is None:
+        raise FileNotFoundError(f"lmms is not installed ({LMMS_INSTALL_HINT})")
+    # LMMS refuses root unless told; a build in a container runs as root.
+    root_flag = ["--allowroot"] if os.geteuid() == 0 else []
+    cmd = [lmms, *root_flag, "render", str(project), "-o", str(wav), "-f", "wav"]
+    env = {**os.environ, "QT_QPA_PLATFORM": "offscreen"}
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=timeout_s)
+    if done.returncode != 0 or not wav.is_file():
+        raise RuntimeError(f"{project}: lmms render failed: {done.stderr.strip()[-300:]}")
 
 
 ONSET_SR_HZ = 22050
@@ -419,6 +492,37 @@ def _build_midi_render(src: SongSource, package_dir: Path, root: Path) -> dict[s
     return entry
 
 
+def _lmms_version() -> str:
+    """LMMS's version line ("LMMS 1.2.2")."""
+    import shutil
+
+    lmms = shutil.which("lmms") or "lmms"
+    done = subprocess.run([lmms, "--allowroot", "--version"], capture_output=True, text=True)
+    return (done.stdout.strip().splitlines() or ["LMMS (version unknown)"])[0]
+
+
+def _build_lmms_render(src: SongSource, package_dir: Path, root: Path) -> dict[str, Any]:
+    from quaddance.music.audio import load_audio
+
+    project = package_dir / src.path
+    tempo_map = read_lmms_tempo_map(project)
+    with tempfile.TemporaryDirectory(prefix="quaddance-lmms-") as tmp:
+        wav = Path(tmp) / "render.wav"
+        render_lmms(project, wav)
+        y, _ = load_audio(wav, sr=AUDIO_SR_HZ)
+    beats_s, downbeats_s = _audible_beats(
+        tempo_map.beat_times_s(len(y) / AUDIO_SR_HZ), y, tempo_map
+    )
+    entry = _write_song(src, y, beats_s, downbeats_s, tempo_map, root)
+    entry["source"] = {"paths": [src.path], "renderer": _lmms_version()}
+    entry["annotation"] = (
+        "the project's tempo and meter: a beat every quarter note from tick 0 (exact: the "
+        "audio is rendered from the same project); downbeats every bar; beats over the "
+        "audible span"
+    )
+    return entry
+
+
 def build(root: Path = ROOT, debs: dict[str, Path] | None = None) -> dict[str, Any]:
     """Download the Debian packages (unless ``debs`` gives their .deb files), write the audio,
     beat files and manifest under ``root``."""
@@ -434,8 +538,10 @@ def build(root: Path = ROOT, debs: dict[str, Path] | None = None) -> dict[str, A
             subprocess.run(
                 ["dpkg-deb", "-x", str(debs[package]), str(tmp_dir / package)], check=True
             )
+        builders = {"recording": _build_recording, "midi_render": _build_midi_render,
+                    "lmms_render": _build_lmms_render}  # fmt: skip
         for src in songs:
-            build_song = _build_midi_render if src.kind == "midi_render" else _build_recording
+            build_song = builders[src.kind]
             entry = build_song(src, tmp_dir / src.package, root)
             entry["source"] = {
                 "debian_package": src.package,
@@ -444,12 +550,8 @@ def build(root: Path = ROOT, debs: dict[str, Path] | None = None) -> dict[str, A
             }
             entries.append(entry)
     manifest = {
-        "description": (
-            "Music made by people elsewhere, with exact beats: band recordings (the Frets on "
-            "Fire song packs of Debian, band and guitar stems mixed to mono, beats from each "
-            "chart's tempo map) and MIDI songs (OpenTTD's OpenMSX set, rendered with fluidsynth)"
-        ),
-        "built_by": f"python -m {MODULE} build",
+        "description": " ".join(_sources_table(root)["description"].split()),
+        "built_by": f"python -m {MODULE} build" + ("" if root == ROOT else f" --root {_rel(root)}"),
         "splits": {s: [e["name"] for e in entries if e["split"] == s] for s in SPLITS},
         "split_reason": split_reason,
         "licences": LICENCES,
@@ -722,7 +824,8 @@ def run_real_bench(
         rows.append(score_song(song, madmom.get(song.name)))
     results = {
         "benchmark": "beats_real",
-        "set": "benchmarks/real_music (manifest.json): band recordings, beats from the charts",
+        "set": f"{_rel(root)} (manifest.json): {load_manifest(root)['description']}",
+        "sources": f"{_rel(root)}/{SOURCES_NAME}",
         "metric": (
             "beat F-measure, +-70 ms, one-to-one, no trim; f = strict, f_metrical = at the "
             "tracker's own metrical level (same, double or half tempo reference); online "
@@ -770,13 +873,28 @@ def _cell(mean: dict[str, Any], key: str, digits: int = 2) -> str:
     return "-" if value is None else f"{value:.{digits}f}"
 
 
+def _part_title(part: str) -> str:
+    """ "heldout_midi_render" -> "heldout, MIDI renders"."""
+    title = part.replace("_", ", ")
+    return title.replace("midi, render", "MIDI renders").replace("lmms, render", "LMMS renders")
+
+
 def report_md(results: dict[str, Any]) -> str:
     """The markdown report of `run_real_bench`'s results: per part (held-out first), each
     tracker's beat F strict and at its metrical level, downbeat F, tempo within 4 %; lock
     times; then every song."""
     means = results["means"]
-    parts = [p for p in ("heldout", "heldout_recording", "heldout_midi_render", "tuning",
-                         "tuning_recording", "tuning_midi_render") if p in means]  # fmt: skip
+
+    # Each split, then its kinds (where a set has more than one).
+    def shown(part: str, split: str) -> bool:
+        return part in means and (
+            part == split or 0 < means[part]["n_songs"] < means[split]["n_songs"]
+        )
+
+    parts = [
+        p for split in ("heldout", "tuning") for p in (split, *(f"{split}_{k}" for k in KINDS))
+        if shown(p, split)
+    ]  # fmt: skip
     lines = [
         "# Beats on real music",
         "",
@@ -799,14 +917,14 @@ def report_md(results: dict[str, Any]) -> str:
         ]
     lines += [
         "The held-out part was fixed before any tracker ran on these songs "
-        "(`benchmarks/real_music/sources.toml`); the tuning part is listed last.",
+        f"(`{results.get('sources', 'benchmarks/real_music/sources.toml')}`); the tuning part "
+        "is listed last.",
         "",
     ]
     for part in parts:
         m = means[part]
         lines += [
-            f"## {part.replace('_', ', ').replace('midi, render', 'MIDI renders')}"
-            f" ({m['n_songs']} songs, {m['minutes']} min)",
+            f"## {_part_title(part)} ({m['n_songs']} songs, {m['minutes']} min)",
             "",
             "| tracker | F strict | F at its metrical level | downbeat F | tempo within 4 % "
             "(or x2, x1/2) |",
@@ -867,6 +985,10 @@ def main(argv: list[str] | None = None) -> None:
     m = sub.add_parser("report", help="the markdown report of a results file")
     m.add_argument("--results", type=Path, default=Path("benchmarks/results/beats_real.json"))
     m.add_argument("--out", type=Path, default=Path("docs/results/beats_real.md"))
+    for p in (b, c, r):
+        sets = f"{_rel(ROOT)} or {_rel(LMMS_ROOT)}"
+        p.add_argument("--root", type=Path, default=ROOT,
+                       help=f"the set's folder (its sources.toml): {sets}")  # fmt: skip
     args = parser.parse_args(argv)
     if args.command == "report":
         from quaddance.fileio import atomic_path
@@ -879,17 +1001,17 @@ def main(argv: list[str] | None = None) -> None:
         debs = None
         if args.deb:
             debs = {p.name.split("_")[0]: p.resolve() for p in args.deb}
-        build(debs=debs)
+        build(args.root, debs=debs)
     elif args.command == "check":
         from quaddance.fileio import write_json
 
-        rows = [check_song(s, args.clicks_dir) for s in load_songs()]
+        rows = [check_song(s, args.clicks_dir) for s in load_songs(args.root)]
         write_json(args.out, {"benchmark": "real_music_check", "command":
                               f"python -m {MODULE} check", "songs": rows})  # fmt: skip
         for row in rows:
             print(row["name"], row["whole"], row["second_half"], row["control_half_beat_late"])
     else:
-        results = run_real_bench(args.out, madmom_python=args.madmom_python,
+        results = run_real_bench(args.out, args.root, madmom_python=args.madmom_python,
                                  progress=lambda name: print(name, flush=True))  # fmt: skip
         print(json.dumps(results["means"], indent=2))
 

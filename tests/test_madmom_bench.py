@@ -122,7 +122,8 @@ def test_bench_beats_real_picks_madmom_by_its_options(
 
     asked: list[str | None] = []
 
-    def fake_bench(out, madmom_python=None, progress=None):
+    def fake_bench(out, root=real_music.ROOT, madmom_python=None, progress=None):
+        assert root == real_music.ROOT
         asked.append(madmom_python)
         return {"songs": [], "means": {}, "command": "c", "set": "s", "metric": "m"}
 
@@ -151,6 +152,41 @@ def test_bench_beats_real_picks_madmom_by_its_options(
     assert report.read_text().startswith("# Beats on real music")
 
 
+def test_bench_beats_real_lmms_scores_the_lmms_set_once_built(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import benchmarks.real_music as real_music
+    from benchmarks.cli import app
+    from quaddance.errors import QuaddanceError
+
+    scored: list[tuple[Path, Path]] = []
+
+    def fake_bench(out, root=real_music.ROOT, madmom_python=None, progress=None):
+        scored.append((Path(out), Path(root)))
+        return {"songs": [], "means": {}, "command": "c", "set": "s", "metric": "m"}
+
+    monkeypatch.setattr(real_music, "run_real_bench", fake_bench)
+    lmms = tmp_path / "real_music_lmms"
+    lmms.mkdir()
+    monkeypatch.setattr(real_music, "LMMS_ROOT", lmms)
+    args = ["beats", "--sets", "real-lmms", "--out", str(tmp_path / "b.json"), "--no-madmom"]
+    # Not built: one error that says how to build it.
+    result = CliRunner().invoke(app, args)
+    assert isinstance(result.exception, QuaddanceError)
+    assert "apt-get install lmms" in str(result.exception)
+    assert "build --root" in str(result.exception) and not scored
+    (lmms / real_music.MANIFEST_NAME).write_text("{}")
+    both = [*args[:2], "real,real-lmms", *args[3:], "--report", str(tmp_path / "r.md")]
+    result = CliRunner().invoke(app, both)
+    assert result.exit_code == 0, result.output
+    assert scored == [
+        (tmp_path / "b_real.json", real_music.ROOT),
+        (tmp_path / "b_real_lmms.json", lmms),
+    ]
+    # Each set its own report.
+    assert (tmp_path / "r.md").is_file() and (tmp_path / "r_lmms.md").is_file()
+
+
 def test_the_real_music_report_gives_each_tracker_per_part(tmp_path: Path) -> None:
     from benchmarks.real_music import report_md
 
@@ -175,3 +211,29 @@ def test_the_real_music_report_gives_each_tracker_per_part(tmp_path: Path) -> No
     assert "BeatNet" not in text.split("## Songs")[0]
     assert "| a | heldout | recording | 120 | 0.70 / 0.80 | - | - | - | - | - | 4.2 |" in text
     assert "x86_64, 2 CPU cores" in text and "CC BY-NC-SA" in text
+
+
+def test_the_real_music_report_shows_a_kind_only_where_a_part_has_several() -> None:
+    from benchmarks.real_music import report_md
+
+    def mean(n: int) -> dict:
+        return {"n_songs": n, "minutes": 1.0, "n_locked": 0, "locked_within_6s": 0,
+                "lock_s_median": None}  # fmt: skip
+
+    results = {
+        "command": "c", "set": "S", "metric": "M", "sources": "benchmarks/x/sources.toml",
+        "means": {"heldout": mean(3), "heldout_recording": mean(1),
+                  "heldout_lmms_render": mean(2), "heldout_midi_render": mean(0),
+                  "tuning": mean(2), "tuning_lmms_render": mean(2)},
+        "songs": [],
+    }  # fmt: skip
+    text = report_md(results)
+    headings = [line for line in text.splitlines() if line.startswith("## ")]
+    assert headings == [
+        "## heldout (3 songs, 1.0 min)",
+        "## heldout, recording (1 songs, 1.0 min)",
+        "## heldout, LMMS renders (2 songs, 1.0 min)",
+        "## tuning (2 songs, 1.0 min)",
+        "## Songs",
+    ]
+    assert "(`benchmarks/x/sources.toml`)" in text

@@ -97,3 +97,86 @@ def test_grid_offset_finds_where_most_onsets_fall() -> None:
         )
     )
     assert grid_offset_s(onsets, grid) == pytest.approx(0.03, abs=0.004)
+
+
+# --- the LMMS part (benchmarks/real_music_lmms: sources committed, audio built) --------------
+
+
+def _lmms_project(path: Path, head: str, compressed: bool) -> Path:
+    """A minimal LMMS project: ``head`` is the <head> element's XML."""
+    import struct
+    import zlib
+
+    xml = f'<?xml version="1.0"?><lmms-project version="1.0">{head}<song/></lmms-project>'
+    data = xml.encode()
+    # .mmpz is Qt's qCompress: the length, big-endian, then a zlib stream.
+    path.write_bytes(struct.pack(">I", len(data)) + zlib.compress(data) if compressed else data)
+    return path
+
+
+def test_lmms_tempo_map_reads_the_projects_tempo_and_meter(tmp_path: Path) -> None:
+    from benchmarks.real_music import read_lmms_tempo_map
+
+    head = '<head bpm="128" timesig_numerator="3" timesig_denominator="4"/>'
+    tm = read_lmms_tempo_map(_lmms_project(tmp_path / "a.mmpz", head, compressed=True))
+    assert tm.bpm == (128.0,) and tm.beats_per_bar == 3
+    np.testing.assert_allclose(tm.beat_times_s(2.0), np.arange(5) * 60.0 / 128.0)
+    # Beats are quarter notes: a 1/1 bar holds four, an 8/4 bar eight.
+    whole = '<head bpm="140" timesig_numerator="1" timesig_denominator="1"/>'
+    assert read_lmms_tempo_map(_lmms_project(tmp_path / "b.mmp", whole, False)).beats_per_bar == 4
+    eight = '<head bpm="140" timesig_numerator="8" timesig_denominator="4"/>'
+    assert read_lmms_tempo_map(_lmms_project(tmp_path / "c.mmp", eight, False)).beats_per_bar == 8
+
+
+def test_lmms_tempo_map_refuses_what_it_cannot_read(tmp_path: Path) -> None:
+    from benchmarks.real_music import read_lmms_tempo_map
+
+    automated = '<head bpm="120"><bpm id="7" value="120"/></head>'
+    with pytest.raises(ValueError, match="automated"):
+        read_lmms_tempo_map(_lmms_project(tmp_path / "auto.mmpz", automated, compressed=True))
+    junk = tmp_path / "junk.mmpz"
+    junk.write_bytes(b"\0\0\0\4not zlib")
+    with pytest.raises(ValueError, match=r"junk\.mmpz: not an LMMS project"):
+        read_lmms_tempo_map(junk)
+    with pytest.raises(ValueError, match="no <head"):
+        read_lmms_tempo_map(_lmms_project(tmp_path / "nohead.mmp", "", compressed=False))
+
+
+def test_lmms_render_without_lmms_names_the_install(monkeypatch, tmp_path: Path) -> None:
+    import shutil
+
+    from benchmarks.real_music import LMMS_INSTALL_HINT, render_lmms
+
+    monkeypatch.setattr(shutil, "which", lambda name: None)
+    with pytest.raises(FileNotFoundError, match=LMMS_INSTALL_HINT):
+        render_lmms(tmp_path / "a.mmpz", tmp_path / "a.wav")
+
+
+def test_lmms_sources_are_split_by_artist_and_licensed() -> None:
+    from benchmarks.real_music import LMMS_ROOT
+
+    songs, reason = read_sources(LMMS_ROOT)
+    assert reason and len(songs) >= 20
+    assert len({s.name for s in songs}) == len(songs)
+    assert {s.kind for s in songs} == {"lmms_render"}
+    assert {s.package for s in songs} == {"lmms-common"}
+    assert all(s.licence in LICENCES and s.split in SPLITS for s in songs)
+    # No artist in both parts: a tracker tuned on an artist's songs is not judged on others.
+    by_artist: dict[str, set[str]] = {}
+    for s in songs:
+        by_artist.setdefault(s.artist, set()).add(s.split)
+    assert all(len(parts) == 1 for parts in by_artist.values()), by_artist
+    assert {s.split for s in songs} == set(SPLITS)
+    # Each project is named in the licence file.
+    licences = (LMMS_ROOT / "LICENCES.md").read_text()
+    assert all(Path(s.path).name.split(".")[0] in licences for s in songs)
+
+
+def test_lmms_song_kind_from_its_project_file() -> None:
+    from benchmarks.real_music import SongSource
+
+    def kind(path: str) -> str:
+        return SongSource("x", "p", path, "t", "a", "MIT", "tuning", "").kind
+
+    assert kind("a/b.mmpz") == kind("a/b.mmp") == "lmms_render"
+    assert kind("a/b.mid") == "midi_render" and kind("a/song") == "recording"
