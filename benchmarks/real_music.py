@@ -831,7 +831,7 @@ def run_real_bench(
             "tracker's own metrical level (same, double or half tempo reference); online "
             "scores count the beats after the first lock (lock_s); downbeat F strict"
         ),
-        "command": "quaddance bench beats --sets real",
+        "command": "quaddance bench beats --sets " + ("real-lmms" if root == LMMS_ROOT else "real"),
         "machine": machine_info(),
         "madmom_python": madmom_python,
         # Per split, and per split and kind: the recordings are the harder, truer test.

@@ -180,3 +180,57 @@ def test_lmms_song_kind_from_its_project_file() -> None:
 
     assert kind("a/b.mmpz") == kind("a/b.mmp") == "lmms_render"
     assert kind("a/b.mid") == "midi_render" and kind("a/song") == "recording"
+
+
+def test_real_bench_names_its_set_and_command(monkeypatch, tmp_path: Path) -> None:
+    import json
+
+    import benchmarks.real_music as real_music
+
+    root = tmp_path / "set"
+    (root / "beats").mkdir(parents=True)
+    sf.write(str(root / "a.wav"), np.zeros(22050, np.float32), 22050)
+    np.savetxt(root / "beats/a.beats", [0.1, 0.6])
+    np.savetxt(root / "beats/a.downbeats", [0.1])
+    (root / "L.md").write_text("licence")
+    entry = {"name": "a", "split": "heldout", "kind": "lmms_render", "title": "A", "artist": "B",
+             "audio": "a.wav", "beats": "beats/a.beats", "downbeats": "beats/a.downbeats",
+             "licence_file": "L.md", "licence": "MIT", "duration_s": 1.0,
+             "tempo_bpm": [120, 120], "meter": "4/4"}  # fmt: skip
+    manifest = {"description": "Songs of a test", "songs": [entry]}
+    (root / "manifest.json").write_text(json.dumps(manifest))
+    row = {"name": "a", "split": "heldout", "kind": "lmms_render", "duration_s": 60.0,
+           "lock_s": 2.0, "f_offline": 0.5}  # fmt: skip
+    monkeypatch.setattr(real_music, "score_song", lambda song, madmom=None: dict(row))
+    results = real_music.run_real_bench(tmp_path / "r.json", root)
+    assert results["command"] == "quaddance bench beats --sets real"
+    assert results["set"] == f"{root} (manifest.json): Songs of a test"
+    assert results["sources"] == f"{root}/sources.toml"
+    assert results["means"]["heldout"]["f_offline"] == 0.5
+    assert results["means"]["heldout_lmms_render"]["n_songs"] == 1
+    assert json.loads((tmp_path / "r.json").read_text())["means"] == results["means"]
+    monkeypatch.setattr(real_music, "LMMS_ROOT", root)
+    results = real_music.run_real_bench(tmp_path / "r.json", root)
+    assert results["command"] == "quaddance bench beats --sets real-lmms"
+
+
+def test_real_music_commands_take_the_sets_root(monkeypatch, tmp_path: Path) -> None:
+    import benchmarks.real_music as real_music
+
+    calls: list[tuple[str, Path]] = []
+    monkeypatch.setattr(real_music, "build", lambda root, debs=None: calls.append(("build", root)))
+    monkeypatch.setattr(
+        real_music, "load_songs", lambda root=real_music.ROOT: calls.append(("check", root)) or []
+    )
+
+    def bench(out, root=real_music.ROOT, madmom_python=None, progress=None):
+        calls.append(("bench", root))
+        return {"means": {}}
+
+    monkeypatch.setattr(real_music, "run_real_bench", bench)
+    lmms = real_music.LMMS_ROOT
+    real_music.main(["build", "--root", str(lmms)])
+    real_music.main(["check", "--root", str(lmms), "--out", str(tmp_path / "c.json")])
+    real_music.main(["bench", "--root", str(lmms), "--out", str(tmp_path / "b.json")])
+    real_music.main(["bench", "--out", str(tmp_path / "b.json")])
+    assert calls == [("build", lmms), ("check", lmms), ("bench", lmms), ("bench", real_music.ROOT)]
