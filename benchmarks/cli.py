@@ -37,9 +37,10 @@ def bench_live_cmd(
     sets: Annotated[
         str,
         typer.Option(
-            help="Sets, comma-separated: random, untuned, live, heldout (tuning too); the "
-            "whole loop runs on the live-case sets among them (live, heldout) and, with "
-            "tuning, on 8 tuning songs."
+            help="Sets, comma-separated: random, untuned, live, heldout (tuning too); real, "
+            "real-tuning (benchmarks/real_music's parts), real-lmms, real-lmms-tuning (its "
+            "LMMS part, once built); the whole loop runs on the live-case sets among them "
+            "(live, heldout) and, with tuning, on 8 tuning songs."
         ),
     ] = "random,untuned,live,heldout",
     random: Annotated[

@@ -18,8 +18,9 @@ seam fault (both front paws up, a fall) and its late first move after a lock. ``
 
 ``real`` and ``real-tuning`` are the held-out and tuning parts of the real-music set
 (``benchmarks/real_music``: band recordings and MIDI songs made by people elsewhere, beats from
-their charts); with madmom installed (``scripts/install_madmom.sh``), madmom's online tracker is
-scored on the same span of them.
+their charts), ``real-lmms`` and ``real-lmms-tuning`` those of its LMMS part
+(``benchmarks/real_music_lmms``, once built); with madmom installed
+(``scripts/install_madmom.sh``), madmom's online tracker is scored on the same span of them.
 
 ``tuning`` (asked for by name, not reported by default) is the beat benchmark's tuning set plus
 `live_tuning_songs`: songs of the untuned set's hard kinds, random MIDI songs from other
@@ -52,12 +53,18 @@ from quaddance.music.live import OnlineTrack, track_samples
 LIVE_CASE_SETS = ("live", "heldout")
 """The sets of live-case songs (`live_case_songs`), which the whole live loop is run on."""
 
-REAL_SETS = {"real": "heldout", "real-tuning": "tuning"}
-"""The real-music sets and the split of ``benchmarks/real_music`` each one is."""
+REAL_SETS = {
+    "real": ("real_music", "heldout"),
+    "real-tuning": ("real_music", "tuning"),
+    "real-lmms": ("real_music_lmms", "heldout"),
+    "real-lmms-tuning": ("real_music_lmms", "tuning"),
+}
+"""The real-music sets: the folder under ``benchmarks/`` and the split each one is."""
 
 LIVE_SETS = (*BEAT_SETS, *LIVE_CASE_SETS, *REAL_SETS)
 """``tuning``, ``random``, ``untuned`` (``benchmarks/beats.py``), ``live`` (``live_songs``),
-``heldout`` (``heldout_songs``), ``real`` and ``real-tuning`` (`real_songs`)."""
+``heldout`` (``heldout_songs``), ``real``, ``real-tuning``, ``real-lmms`` and
+``real-lmms-tuning`` (`real_songs`)."""
 
 DEFAULT_SETS = ("random", "untuned", "live", "heldout")
 """The sets reported by default: all but ``tuning``."""
@@ -343,26 +350,42 @@ def live_case_songs(
 
 
 def real_songs(sets: tuple[str, ...], sr: int) -> list[LiveSong]:
-    """The real-music songs of the ``REAL_SETS`` among ``sets``, at ``sr``."""
-    from benchmarks.real_music import load_audio_at, load_songs
+    """The real-music songs of the ``REAL_SETS`` among ``sets``, at ``sr``.
+
+    Raises:
+        QuaddanceError: a set's folder is not built (the LMMS part), naming how to build it.
+    """
+    from benchmarks.real_music import load_audio_at
 
     songs = []
-    for set_name, split in REAL_SETS.items():
-        if set_name in sets:
+    for set_name in sets:
+        if set_name in REAL_SETS:
             songs += [
                 LiveSong(s.name, set_name, load_audio_at(s, sr), s.beats_s, s.downbeats_s)
-                for s in load_songs(splits=(split,))
+                for s in _real_set(set_name)
             ]
     return songs
+
+
+def _real_set(set_name: str) -> list:
+    """The `RealSong`s of real-music set ``set_name`` (a key of ``REAL_SETS``)."""
+    import benchmarks.real_music as real_music
+
+    folder, split = REAL_SETS[set_name]
+    try:
+        return real_music.load_songs(real_music.ROOT.parent / folder, splits=(split,))
+    except FileNotFoundError as e:
+        raise QuaddanceError(str(e)) from None
 
 
 def madmom_online_tracks(python: str | Path, songs: list[LiveSong]) -> dict[str, np.ndarray]:
     """madmom's online beats of each real-music song (``REAL_SETS``): {name: (n,) s}. madmom
     hears the recording decoded at its models' rate, not our tracker's."""
-    from benchmarks.real_music import load_songs, madmom_song_tracks
+    from benchmarks.real_music import madmom_song_tracks
 
     names = {song.name for song in songs}
-    real = [s for s in load_songs() if s.name in names]
+    real = [s for name in dict.fromkeys(song.set for song in songs)
+            for s in _real_set(name) if s.name in names]  # fmt: skip
     tracks = madmom_song_tracks(python, real, ("online",))
     return {name: row["online"] for name, row in tracks.items()}
 

@@ -53,10 +53,10 @@ import numpy as np
 MODULE = "benchmarks.real_music"
 """This module's name, for the commands it prints (``__name__`` is ``__main__`` under -m)."""
 ROOT = Path(__file__).resolve().parent / "real_music"
+"""The set's folder: ``manifest.json``, ``audio/``, ``beats/``, ``LICENCES.md``."""
 LMMS_ROOT = Path(__file__).resolve().parent / "real_music_lmms"
 """The LMMS part: songs rendered by LMMS when built (``build --root``), not committed (its
 audio would pass the set's 50 MB); only its sources and licences are."""
-"""The set's folder: ``manifest.json``, ``audio/``, ``beats/``, ``LICENCES.md``."""
 MANIFEST_NAME = "manifest.json"
 SPLITS = ("tuning", "heldout")
 AUDIO_SR_HZ = 44100

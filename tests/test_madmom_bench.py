@@ -99,7 +99,11 @@ def test_real_sets_are_the_real_music_splits(monkeypatch: pytest.MonkeyPatch) ->
     from benchmarks.real_music import load_songs
 
     assert set(REAL_SETS) <= set(LIVE_SETS)
-    assert set(REAL_SETS.values()) == set(real_music.SPLITS)
+    assert {split for _, split in REAL_SETS.values()} == set(real_music.SPLITS)
+    assert {folder for folder, _ in REAL_SETS.values()} == {
+        real_music.ROOT.name,
+        real_music.LMMS_ROOT.name,
+    }
     # The audio is not decoded here: only which songs each set holds, and their beats.
     monkeypatch.setattr(real_music, "load_audio_at", lambda song, sr: np.zeros(sr))
     songs = real_songs(("real", "random"), 11025)
@@ -110,6 +114,35 @@ def test_real_sets_are_the_real_music_splits(monkeypatch: pytest.MonkeyPatch) ->
     np.testing.assert_array_equal(songs[0].downbeats_s, heldout[0].downbeats_s)
     assert [s.name for s in real_songs(("real-tuning",), 11025)] == [
         s.name for s in load_songs(splits=("tuning",))
+    ]
+
+
+def test_live_bench_real_lmms_sets_read_the_lmms_part(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    import benchmarks.real_music as real_music
+    from quaddance.errors import QuaddanceError
+
+    asked: list[tuple[Path, tuple[str, ...]]] = []
+
+    def songs_of(root: Path, splits: tuple[str, ...]) -> list:
+        if not (root / "manifest.json").is_file():
+            raise FileNotFoundError(f"no real-music manifest at {root}: run the build")
+        asked.append((root, splits))
+        return []
+
+    monkeypatch.setattr(real_music, "load_songs", songs_of)
+    monkeypatch.setattr(real_music, "ROOT", tmp_path / "real_music")
+    # Not built: one error that says what is missing, not a traceback.
+    with pytest.raises(QuaddanceError, match="no real-music manifest"):
+        real_songs(("real-lmms",), 11025)
+    for folder in ("real_music", "real_music_lmms"):
+        (tmp_path / folder).mkdir()
+        (tmp_path / folder / "manifest.json").write_text("{}")
+    assert real_songs(("real-lmms-tuning", "real"), 11025) == []
+    assert asked == [
+        (tmp_path / "real_music_lmms", ("tuning",)),
+        (tmp_path / "real_music", ("heldout",)),
     ]
 
 
