@@ -203,11 +203,11 @@ def bench_beats_cmd(
     console = Console(stderr=True)
     madmom_python = _madmom_python(madmom_python, no_madmom, console)
     chosen = tuple(s.strip() for s in sets.split(",") if s.strip())
-    from benchmarks.real_music import LMMS_ROOT, ROOT
+    from benchmarks.real_music import REAL_SET_ROOTS
 
-    real_sets = {"real": (ROOT, "_real"), "real-lmms": (LMMS_ROOT, "_real_lmms")}
-    for name, (root, suffix) in real_sets.items():
+    for name, root in REAL_SET_ROOTS.items():
         if name in chosen:
+            suffix = "_" + name.replace("-", "_")  # beats_real.json, beats_real_lmms.json
             real_out = out.with_name(f"{out.stem}{suffix}{out.suffix}")
             # One report per set: the second set's goes beside the first's.
             to = (
@@ -216,7 +216,7 @@ def bench_beats_cmd(
                 else (report.with_name(f"{report.stem}_lmms{report.suffix}"))
             )
             _bench_real_beats(real_out, root, madmom_python, console, to)
-    chosen = tuple(s for s in chosen if s not in real_sets)
+    chosen = tuple(s for s in chosen if s not in REAL_SET_ROOTS)
     if not chosen:
         return
     with console.status("Scoring beats...") as status:
@@ -254,14 +254,9 @@ def _bench_real_beats(
     from rich.console import Console
     from rich.table import Table
 
-    from benchmarks.real_music import load_manifest, report_md, run_real_bench
-    from quaddance.errors import QuaddanceError
+    from benchmarks.real_music import report_md, run_real_bench
     from quaddance.fileio import atomic_path
 
-    try:
-        load_manifest(root)
-    except FileNotFoundError as e:
-        raise QuaddanceError(str(e)) from None
     with console.status("Scoring beats on real music...") as status:
         results = run_real_bench(
             real_out,

@@ -54,12 +54,13 @@ LIVE_CASE_SETS = ("live", "heldout")
 """The sets of live-case songs (`live_case_songs`), which the whole live loop is run on."""
 
 REAL_SETS = {
-    "real": ("real_music", "heldout"),
-    "real-tuning": ("real_music", "tuning"),
-    "real-lmms": ("real_music_lmms", "heldout"),
-    "real-lmms-tuning": ("real_music_lmms", "tuning"),
+    "real": ("real", "heldout"),
+    "real-tuning": ("real", "tuning"),
+    "real-lmms": ("real-lmms", "heldout"),
+    "real-lmms-tuning": ("real-lmms", "tuning"),
 }
-"""The real-music sets: the folder under ``benchmarks/`` and the split each one is."""
+"""The real-music sets: the set (``benchmarks.real_music.REAL_SET_ROOTS``) and the split each
+one is."""
 
 LIVE_SETS = (*BEAT_SETS, *LIVE_CASE_SETS, *REAL_SETS)
 """``tuning``, ``random``, ``untuned`` (``benchmarks/beats.py``), ``live`` (``live_songs``),
@@ -353,7 +354,8 @@ def real_songs(sets: tuple[str, ...], sr: int) -> list[LiveSong]:
     """The real-music songs of the ``REAL_SETS`` among ``sets``, at ``sr``.
 
     Raises:
-        QuaddanceError: a set's folder is not built (the LMMS part), naming how to build it.
+        QuaddanceError: a set's folder is not built (the LMMS part), naming how to build it
+            (``benchmarks.real_music.SetFileMissingError``).
     """
     from benchmarks.real_music import load_audio_at
 
@@ -371,11 +373,8 @@ def _real_set(set_name: str) -> list:
     """The `RealSong`s of real-music set ``set_name`` (a key of ``REAL_SETS``)."""
     import benchmarks.real_music as real_music
 
-    folder, split = REAL_SETS[set_name]
-    try:
-        return real_music.load_songs(real_music.ROOT.parent / folder, splits=(split,))
-    except FileNotFoundError as e:
-        raise QuaddanceError(str(e)) from None
+    real_set, split = REAL_SETS[set_name]
+    return real_music.load_songs(real_music.REAL_SET_ROOTS[real_set], splits=(split,))
 
 
 def madmom_online_tracks(python: str | Path, songs: list[LiveSong]) -> dict[str, np.ndarray]:

@@ -50,6 +50,8 @@ from typing import Any
 
 import numpy as np
 
+from quaddance.errors import QuaddanceError
+
 MODULE = "benchmarks.real_music"
 """This module's name, for the commands it prints (``__name__`` is ``__main__`` under -m)."""
 ROOT = Path(__file__).resolve().parent / "real_music"
@@ -57,6 +59,8 @@ ROOT = Path(__file__).resolve().parent / "real_music"
 LMMS_ROOT = Path(__file__).resolve().parent / "real_music_lmms"
 """The LMMS part: songs rendered by LMMS when built (``build --root``), not committed (its
 audio would pass the set's 50 MB); only its sources and licences are."""
+REAL_SET_ROOTS = {"real": ROOT, "real-lmms": LMMS_ROOT}
+"""The real-music sets by their name in ``bench beats --sets`` / ``bench live --sets``."""
 MANIFEST_NAME = "manifest.json"
 SPLITS = ("tuning", "heldout")
 AUDIO_SR_HZ = 44100
@@ -117,6 +121,16 @@ def _rel(root: Path) -> str:
     return str(root.resolve().relative_to(top)) if root.resolve().is_relative_to(top) else str(root)
 
 
+def build_command(root: Path) -> str:
+    """The command that builds the set under ``root``."""
+    return f"python -m {MODULE} build" + ("" if root == ROOT else f" --root {_rel(root)}")
+
+
+class SetFileMissingError(QuaddanceError, FileNotFoundError):
+    """A file of a real-music set is missing (the set not built, or a listed file gone): a
+    one-line error for the benchmark commands, still a FileNotFoundError for callers."""
+
+
 def _sources_table(root: Path) -> dict[str, Any]:
     import tomllib
 
@@ -153,9 +167,10 @@ def load_manifest(root: Path = ROOT) -> dict[str, Any]:
     """The manifest of the set under ``root`` (``build`` writes it)."""
     path = root / MANIFEST_NAME
     if not path.is_file():
-        build = f"python -m {MODULE} build" + ("" if root == ROOT else f" --root {_rel(root)}")
         need = f"{LMMS_INSTALL_HINT}; " if root == LMMS_ROOT else ""
-        raise FileNotFoundError(f"no real-music manifest at {path}: run `{need}{build}`")
+        raise SetFileMissingError(
+            f"no real-music manifest at {path}: run `{need}{build_command(root)}`"
+        )
     return json.loads(path.read_text())
 
 
@@ -179,7 +194,9 @@ def load_songs(root: Path = ROOT, splits: tuple[str, ...] = SPLITS) -> list[Real
             raise ValueError(f"{entry['name']}: licence {entry['licence']!r} is not listed")
         for key in ("audio", "beats", "downbeats", "licence_file"):
             if not (root / entry[key]).is_file():
-                raise FileNotFoundError(f"{entry['name']}: {key} file {root / entry[key]} missing")
+                raise SetFileMissingError(
+                    f"{entry['name']}: {key} file {root / entry[key]} missing"
+                )
         if entry["split"] not in splits:
             continue
         beats_s = _read_times(root / entry["beats"])
@@ -551,7 +568,7 @@ def build(root: Path = ROOT, debs: dict[str, Path] | None = None) -> dict[str, A
             entries.append(entry)
     manifest = {
         "description": " ".join(_sources_table(root)["description"].split()),
-        "built_by": f"python -m {MODULE} build" + ("" if root == ROOT else f" --root {_rel(root)}"),
+        "built_by": build_command(root),
         "splits": {s: [e["name"] for e in entries if e["split"] == s] for s in SPLITS},
         "split_reason": split_reason,
         "licences": LICENCES,
@@ -831,7 +848,8 @@ def run_real_bench(
             "tracker's own metrical level (same, double or half tempo reference); online "
             "scores count the beats after the first lock (lock_s); downbeat F strict"
         ),
-        "command": "quaddance bench beats --sets " + ("real-lmms" if root == LMMS_ROOT else "real"),
+        "command": "quaddance bench beats --sets "
+        + next((name for name, r in REAL_SET_ROOTS.items() if r == root), "real"),
         "machine": machine_info(),
         "madmom_python": madmom_python,
         # Per split, and per split and kind: the recordings are the harder, truer test.

@@ -100,10 +100,8 @@ def test_real_sets_are_the_real_music_splits(monkeypatch: pytest.MonkeyPatch) ->
 
     assert set(REAL_SETS) <= set(LIVE_SETS)
     assert {split for _, split in REAL_SETS.values()} == set(real_music.SPLITS)
-    assert {folder for folder, _ in REAL_SETS.values()} == {
-        real_music.ROOT.name,
-        real_music.LMMS_ROOT.name,
-    }
+    assert {real_set for real_set, _ in REAL_SETS.values()} == set(real_music.REAL_SET_ROOTS)
+    assert set(real_music.REAL_SET_ROOTS.values()) == {real_music.ROOT, real_music.LMMS_ROOT}
     # The audio is not decoded here: only which songs each set holds, and their beats.
     monkeypatch.setattr(real_music, "load_audio_at", lambda song, sr: np.zeros(sr))
     songs = real_songs(("real", "random"), 11025)
@@ -126,13 +124,13 @@ def test_live_bench_real_lmms_sets_read_the_lmms_part(
     asked: list[tuple[Path, tuple[str, ...]]] = []
 
     def songs_of(root: Path, splits: tuple[str, ...]) -> list:
-        if not (root / "manifest.json").is_file():
-            raise FileNotFoundError(f"no real-music manifest at {root}: run the build")
+        real_music.load_manifest(root)  # as load_songs does first
         asked.append((root, splits))
         return []
 
     monkeypatch.setattr(real_music, "load_songs", songs_of)
-    monkeypatch.setattr(real_music, "ROOT", tmp_path / "real_music")
+    monkeypatch.setitem(real_music.REAL_SET_ROOTS, "real", tmp_path / "real_music")
+    monkeypatch.setitem(real_music.REAL_SET_ROOTS, "real-lmms", tmp_path / "real_music_lmms")
     # Not built: one error that says what is missing, not a traceback.
     with pytest.raises(QuaddanceError, match="no real-music manifest"):
         real_songs(("real-lmms",), 11025)
@@ -195,6 +193,7 @@ def test_bench_beats_real_lmms_scores_the_lmms_set_once_built(
     scored: list[tuple[Path, Path]] = []
 
     def fake_bench(out, root=real_music.ROOT, madmom_python=None, progress=None):
+        real_music.load_manifest(root)  # as run_real_bench's load_songs does first
         scored.append((Path(out), Path(root)))
         return {"songs": [], "means": {}, "command": "c", "set": "s", "metric": "m"}
 
@@ -202,6 +201,7 @@ def test_bench_beats_real_lmms_scores_the_lmms_set_once_built(
     lmms = tmp_path / "real_music_lmms"
     lmms.mkdir()
     monkeypatch.setattr(real_music, "LMMS_ROOT", lmms)
+    monkeypatch.setitem(real_music.REAL_SET_ROOTS, "real-lmms", lmms)
     args = ["beats", "--sets", "real-lmms", "--out", str(tmp_path / "b.json"), "--no-madmom"]
     # Not built: one error that says how to build it.
     result = CliRunner().invoke(app, args)

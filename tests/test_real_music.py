@@ -209,7 +209,7 @@ def test_real_bench_names_its_set_and_command(monkeypatch, tmp_path: Path) -> No
     assert results["means"]["heldout"]["f_offline"] == 0.5
     assert results["means"]["heldout_lmms_render"]["n_songs"] == 1
     assert json.loads((tmp_path / "r.json").read_text())["means"] == results["means"]
-    monkeypatch.setattr(real_music, "LMMS_ROOT", root)
+    monkeypatch.setitem(real_music.REAL_SET_ROOTS, "real-lmms", root)
     results = real_music.run_real_bench(tmp_path / "r.json", root)
     assert results["command"] == "quaddance bench beats --sets real-lmms"
 
