@@ -557,7 +557,8 @@ def build(root: Path = ROOT, debs: dict[str, Path] | None = None) -> dict[str, A
             )
         builders = {"recording": _build_recording, "midi_render": _build_midi_render,
                     "lmms_render": _build_lmms_render}  # fmt: skip
-        for src in songs:
+        for i, src in enumerate(songs, 1):
+            print(f"{src.name} ({i}/{len(songs)}, {src.kind})", flush=True)  # minutes in all
             build_song = builders[src.kind]
             entry = build_song(src, tmp_dir / src.package, root)
             entry["source"] = {
