@@ -6,7 +6,9 @@ Ellis 2007) with the changes that matter for dance music:
 1. Two onset envelopes from a mel spectrogram, each divided by its local level so that a quiet
    intro counts as much as a loud chorus: one for tempo (dB flux, full band + kick/bass band)
    and one for placing beats (dB flux + treble flux with gentler compression, where snare, hats
-   and cymbals make drum hits stand out from off-beat bass notes and chord stabs).
+   and cymbals make drum hits stand out from off-beat bass notes and chord stabs). Half of
+   each is a learned beat activation (`music.beat_activation`, fitted on real music with exact
+   beats), which tells the bands that carry the beat from those that carry off-beats.
 2. The tempo is the lag whose first four multiples carry the most autocorrelation (which rules
    out the "2/3 tempo" error), times a broad log-normal prior centred in the dance range
    (80-160 BPM), which settles the half/double-tempo choice where the music leaves it open:
@@ -38,6 +40,7 @@ import numpy as np
 
 from quaddance.errors import InputFileError
 from quaddance.layout import BEATS_PER_BAR
+from quaddance.music import beat_activation
 
 MIN_BEAT_GAP_S = 0.2
 """Beats are at least this far apart, seconds (300 BPM, above any dance tempo): the offline
@@ -109,6 +112,12 @@ class AnalysisConfig:
     """Shortest section, bars."""
     section_threshold: float = 1.0
     """Novelty a boundary needs; one unit = 3 dB louder or 50 % more onsets (tuned)."""
+    activation_weight: float = 0.5
+    """Share of the learned beat activation (`music.beat_activation`) in both onset envelopes;
+    0 leaves them as measured. Chosen by leaving one artist out of the tuning songs of the
+    real-music sets at a time (``python -m benchmarks.train_beat_activation --cross-validate``)."""
+    activation_model: Path | None = None
+    """The activation's weights file; None: the shipped ``data/beat_activation.json``."""
 
 
 @dataclass
@@ -221,6 +230,7 @@ class _Features:
     hit_onset: np.ndarray  # (n,) full-band log1p flux: loud hits count more than soft notes
     chroma: np.ndarray  # (12, n)
     bass_chroma: np.ndarray  # (12, n) chroma of 30-300 Hz: the bass line's pitch
+    band_rows: np.ndarray  # (16, n) the learned activation's input (`beat_activation`)
     fps: float
 
 
@@ -282,12 +292,29 @@ def _features(y: np.ndarray, sr: int, cfg: AnalysisConfig) -> _Features:
     beat_onset = _local_normalise(
         unit_mean(raw) + cfg.high_band_weight * unit_mean(high_onset), fps, cfg
     )
+    bands = beat_activation.band_flux(flux_db, flux_log)
+    band_rows = np.log1p(np.stack([_local_normalise(row, fps, cfg) for row in bands]))
+    if cfg.activation_weight > 0.0:
+        model = beat_activation.load_model(cfg.activation_model)
+        act = unit_mean(_local_normalise(model.activation(band_rows), fps, cfg))
+        w = cfg.activation_weight
+        tempo_onset = (1.0 - w) * unit_mean(tempo_onset) + w * act
+        beat_onset = (1.0 - w) * unit_mean(beat_onset) + w * act
     rms = rms_from_stft(stft, cfg.n_fft)
     chroma = normalize_peak(banks.chroma @ power, axis=0)
     bass = (banks.freqs_hz >= 30.0) & (banks.freqs_hz <= cfg.bass_chroma_max_hz)
     bass_chroma = banks.chroma[:, bass] @ power[bass]
     hit = flux_log.mean(axis=0)
-    return _Features(tempo_onset, beat_onset, low_onset, raw, rms, hit, chroma, bass_chroma, fps)
+    return _Features(
+        tempo_onset, beat_onset, low_onset, raw, rms, hit, chroma, bass_chroma, band_rows, fps
+    )
+
+
+def activation_rows(y: np.ndarray, sr: int, cfg: AnalysisConfig | None = None) -> np.ndarray:
+    """(16, n) the learned beat activation's input rows for mono audio ``y``, one column per
+    onset frame (what ``python -m benchmarks.train_beat_activation`` fits on)."""
+    cfg = AnalysisConfig(activation_weight=0.0) if cfg is None else cfg
+    return _features(np.asarray(y, dtype=np.float32), sr, cfg).band_rows
 
 
 # --- tempo ------------------------------------------------------------------------------------

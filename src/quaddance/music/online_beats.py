@@ -5,8 +5,9 @@ The tracker sees the audio block by block and never looks ahead. Per 11.6 ms fra
 bass chroma of item 5):
 
 1. Onset envelopes, as in the offline analyser (``music/analysis.py``) but with causal
-   normalisation (running means instead of centred ones): mel dB flux plus kick/bass-band flux
-   for the tempo, mel dB flux plus treble flux for placing beats.
+   normalisation (running means instead of centred ones) and without its learned activation:
+   mel dB flux plus kick/bass-band flux for the tempo, mel dB flux plus treble flux for placing
+   beats.
 2. Tempo, every 0.25 s: the harmonic autocorrelation salience of the last ``TEMPO_WINDOW_S`` of
    the tempo envelope (the same "lag whose multiples line up" score and log-normal prior as the
    offline analyser, which prefers the true tempo to half tempo in the dance range), followed

@@ -1,0 +1,101 @@
+"""The analyser's learned beat activation (`music.beat_activation`): what it was fitted on,
+what it hears, its fit (`benchmarks.train_beat_activation`) and its file."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from benchmarks.real_music import REAL_SET_ROOTS, read_sources
+from benchmarks.train_beat_activation import FPS, SR_HZ, fit, frame_labels
+from quaddance.errors import InputFileError
+from quaddance.music import analysis, beat_activation
+from quaddance.music.beat_activation import N_FEATURES, BeatActivationModel, load_model
+from quaddance.music.synth import render_song
+
+
+def _beat_and_offbeat_frames(beats_s: np.ndarray, n_frames: int) -> tuple[np.ndarray, ...]:
+    on = np.round(beats_s * FPS).astype(int)
+    off = np.round(0.5 * (beats_s[1:] + beats_s[:-1]) * FPS).astype(int)
+    return on[on < n_frames], off[off < n_frames]
+
+
+def _peak_near(x: np.ndarray, frames: np.ndarray) -> np.ndarray:
+    return np.array([x[max(0, f - 1) : f + 2].max() for f in frames])
+
+
+def test_the_shipped_model_was_fitted_on_tuning_songs_only() -> None:
+    model = load_model()
+    splits = {s.name: s.split for root in REAL_SET_ROOTS.values() for s in read_sources(root)[0]}
+    tuning = {name for name, split in splits.items() if split == "tuning"}
+    assert set(model.trained_on) == tuning  # every tuning song, and no held-out one
+    assert model.weights.shape == (N_FEATURES,) and np.all(np.isfinite(model.weights))
+
+
+@pytest.mark.parametrize(("tempo_bpm", "swing"), [(96.0, 0.0), (128.0, 0.0), (110.0, 0.3)])
+def test_the_activation_hears_the_beats_more_than_the_offbeats(tempo_bpm, swing) -> None:
+    y, truth = render_song(tempo_bpm, 20.0, seed=7, swing=swing)
+    rows = analysis.activation_rows(y, SR_HZ)
+    act = load_model().activation(rows)
+    assert act.shape == (rows.shape[1],) and np.all((act >= 0.0) & (act <= 1.0))
+    on, off = _beat_and_offbeat_frames(truth.beats_s, len(act))
+    assert np.median(_peak_near(act, on)) > 1.5 * np.median(_peak_near(act, off))
+
+
+def test_a_fit_learns_where_the_beats_are_and_round_trips(tmp_path: Path) -> None:
+    songs = [render_song(tempo, 15.0, seed=seed) for tempo, seed in ((100.0, 1), (140.0, 2))]
+    rows = [analysis.activation_rows(y, SR_HZ) for y, _ in songs]
+    labels = [
+        frame_labels(t.beats_s, FPS, r.shape[1]) for (_, t), r in zip(songs, rows, strict=True)
+    ]
+    for lab, (_, truth) in zip(labels, songs, strict=True):
+        on, off = _beat_and_offbeat_frames(truth.beats_s, len(lab))
+        assert lab[on].all() and not lab[off].any() and lab.sum() <= 3 * len(truth.beats_s)
+    model = fit(rows, labels, ["a", "b"])
+    y, truth = render_song(120.0, 15.0, seed=3)  # a song it was not fitted on
+    act = model.activation(analysis.activation_rows(y, SR_HZ))
+    on, off = _beat_and_offbeat_frames(truth.beats_s, len(act))
+    assert np.median(_peak_near(act, on)) > 1.5 * np.median(_peak_near(act, off))
+    path = tmp_path / "model.json"
+    model.save(path)
+    back = BeatActivationModel.load(path)
+    assert back.trained_on == ("a", "b")
+    np.testing.assert_allclose(back.weights, model.weights, atol=1e-6)
+    # The analyser reads a model file named in its settings.
+    cfg = analysis.AnalysisConfig(activation_model=path)
+    assert analysis.analyze(y, SR_HZ, cfg).beats_s.size > 20
+
+
+def _good_model_dict() -> dict:
+    return BeatActivationModel(np.zeros(N_FEATURES), 0.0, ("a",), 1.0).to_json_dict()
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        (lambda d: "not json {", "is not a JSON file"),
+        (lambda d: {**d, "format": "other"}, "is not a beat activation model"),
+        (lambda d: {**d, "n_bands": 4}, "bands"),
+        (lambda d: {**d, "weights": d["weights"][:-1]}, "weights must be"),
+        (lambda d: {**d, "weights": ["x"] * N_FEATURES}, "malformed"),
+        (lambda d: {k: v for k, v in d.items() if k != "bias"}, "malformed"),
+    ],
+)
+def test_a_bad_model_file_is_refused_with_its_name(tmp_path: Path, change, message) -> None:
+    path = tmp_path / "model.json"
+    changed = change(_good_model_dict())
+    path.write_text(changed if isinstance(changed, str) else json.dumps(changed))
+    with pytest.raises(InputFileError, match=message) as err:
+        BeatActivationModel.load(path)
+    assert str(path) in str(err.value)
+
+
+def test_a_missing_model_file_stops_the_analysis_with_its_name(tmp_path: Path) -> None:
+    y, _ = render_song(120.0, 5.0, seed=1)
+    cfg = analysis.AnalysisConfig(activation_model=tmp_path / "absent.json")
+    with pytest.raises(InputFileError, match=r"absent\.json"):
+        analysis.analyze(y, SR_HZ, cfg)
+    beat_activation.load_model.cache_clear()
