@@ -27,7 +27,12 @@ from benchmarks.beats import beat_f_measure, metrical_level_f_measure
 from benchmarks.real_music import REAL_SET_ROOTS, RealSong, load_audio_at, load_songs
 from quaddance.fileio import write_json
 from quaddance.music import analysis
-from quaddance.music.beat_activation import BeatActivationModel, design_matrix, shipped_path
+from quaddance.music.beat_activation import (
+    CONTEXT,
+    BeatActivationModel,
+    design_matrix,
+    shipped_path,
+)
 
 MODULE = "benchmarks.train_beat_activation"
 CV_RESULTS = "benchmarks/results/beat_activation_cv.json"
@@ -54,13 +59,14 @@ def fit(
     """Fit the activation on songs' band rows (`analysis.activation_rows`) and frame labels."""
     from sklearn.linear_model import LogisticRegression  # librosa's dependency
 
-    x = np.concatenate([design_matrix(r) for r in rows])
+    x = np.concatenate([design_matrix(r, CONTEXT) for r in rows])
     y = np.concatenate(labels)
     model = LogisticRegression(C=REGULARISATION_C, class_weight="balanced", max_iter=1000)
     model.fit(x, y)
     return BeatActivationModel(
         weights=model.coef_[0].astype(float),
         bias=float(model.intercept_[0]),
+        context=CONTEXT,
         trained_on=tuple(names),
         regularisation_c=REGULARISATION_C,
     )

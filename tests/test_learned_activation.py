@@ -13,18 +13,18 @@ from benchmarks.real_music import REAL_SET_ROOTS, read_sources
 from benchmarks.train_beat_activation import FPS, SR_HZ, fit, frame_labels
 from quaddance.errors import InputFileError
 from quaddance.music import analysis, beat_activation
-from quaddance.music.beat_activation import N_FEATURES, BeatActivationModel, load_model
+from quaddance.music.beat_activation import BeatActivationModel, load_model, n_features
 from quaddance.music.synth import render_song
 
 
-def _beat_and_offbeat_frames(beats_s: np.ndarray, n_frames: int) -> tuple[np.ndarray, ...]:
-    on = np.round(beats_s * FPS).astype(int)
-    off = np.round(0.5 * (beats_s[1:] + beats_s[:-1]) * FPS).astype(int)
-    return on[on < n_frames], off[off < n_frames]
+def _beat_and_offbeat_frames(frames: np.ndarray, n_frames: int) -> tuple[np.ndarray, ...]:
+    on = np.round(frames).astype(int)
+    off = np.round(0.5 * (frames[1:] + frames[:-1])).astype(int)
+    return on[(on >= 0) & (on < n_frames)], off[(off >= 0) & (off < n_frames)]
 
 
-def _peak_near(x: np.ndarray, frames: np.ndarray) -> np.ndarray:
-    return np.array([x[max(0, f - 1) : f + 2].max() for f in frames])
+def _peak_near(x: np.ndarray, frames: np.ndarray, radius: int) -> np.ndarray:
+    return np.array([x[max(0, f - radius) : f + radius + 1].max() for f in frames])
 
 
 def test_the_shipped_model_was_fitted_on_tuning_songs_only() -> None:
@@ -32,7 +32,8 @@ def test_the_shipped_model_was_fitted_on_tuning_songs_only() -> None:
     splits = {s.name: s.split for root in REAL_SET_ROOTS.values() for s in read_sources(root)[0]}
     tuning = {name for name, split in splits.items() if split == "tuning"}
     assert set(model.trained_on) == tuning  # every tuning song, and no held-out one
-    assert model.weights.shape == (N_FEATURES,) and np.all(np.isfinite(model.weights))
+    assert model.context == beat_activation.CONTEXT
+    assert model.weights.shape == (n_features(model.context),)
 
 
 @pytest.mark.parametrize(("tempo_bpm", "swing"), [(96.0, 0.0), (128.0, 0.0), (110.0, 0.3)])
@@ -41,8 +42,8 @@ def test_the_activation_hears_the_beats_more_than_the_offbeats(tempo_bpm, swing)
     rows = analysis.activation_rows(y, SR_HZ)
     act = load_model().activation(rows)
     assert act.shape == (rows.shape[1],) and np.all((act >= 0.0) & (act <= 1.0))
-    on, off = _beat_and_offbeat_frames(truth.beats_s, len(act))
-    assert np.median(_peak_near(act, on)) > 1.5 * np.median(_peak_near(act, off))
+    on, off = _beat_and_offbeat_frames(truth.beats_s * FPS, len(act))
+    assert np.median(_peak_near(act, on, 1)) > 1.5 * np.median(_peak_near(act, off, 1))
 
 
 def test_a_fit_learns_where_the_beats_are_and_round_trips(tmp_path: Path) -> None:
@@ -52,17 +53,17 @@ def test_a_fit_learns_where_the_beats_are_and_round_trips(tmp_path: Path) -> Non
         frame_labels(t.beats_s, FPS, r.shape[1]) for (_, t), r in zip(songs, rows, strict=True)
     ]
     for lab, (_, truth) in zip(labels, songs, strict=True):
-        on, off = _beat_and_offbeat_frames(truth.beats_s, len(lab))
+        on, off = _beat_and_offbeat_frames(truth.beats_s * FPS, len(lab))
         assert lab[on].all() and not lab[off].any() and lab.sum() <= 3 * len(truth.beats_s)
     model = fit(rows, labels, ["a", "b"])
     y, truth = render_song(120.0, 15.0, seed=3)  # a song it was not fitted on
     act = model.activation(analysis.activation_rows(y, SR_HZ))
-    on, off = _beat_and_offbeat_frames(truth.beats_s, len(act))
-    assert np.median(_peak_near(act, on)) > 1.5 * np.median(_peak_near(act, off))
+    on, off = _beat_and_offbeat_frames(truth.beats_s * FPS, len(act))
+    assert np.median(_peak_near(act, on, 1)) > 1.5 * np.median(_peak_near(act, off, 1))
     path = tmp_path / "model.json"
     model.save(path)
     back = BeatActivationModel.load(path)
-    assert back.trained_on == ("a", "b")
+    assert back.trained_on == ("a", "b") and back.context == model.context
     np.testing.assert_allclose(back.weights, model.weights, atol=1e-6)
     # The analyser reads a model file named in its settings.
     cfg = analysis.AnalysisConfig(activation_model=path)
@@ -70,7 +71,10 @@ def test_a_fit_learns_where_the_beats_are_and_round_trips(tmp_path: Path) -> Non
 
 
 def _good_model_dict() -> dict:
-    return BeatActivationModel(np.zeros(N_FEATURES), 0.0, ("a",), 1.0).to_json_dict()
+    context = (3, 3)
+    return BeatActivationModel(
+        np.zeros(n_features(context)), 0.0, context, ("a",), 1.0
+    ).to_json_dict()
 
 
 @pytest.mark.parametrize(
@@ -80,7 +84,9 @@ def _good_model_dict() -> dict:
         (lambda d: {**d, "format": "other"}, "is not a beat activation model"),
         (lambda d: {**d, "n_bands": 4}, "bands"),
         (lambda d: {**d, "weights": d["weights"][:-1]}, "weights must be"),
-        (lambda d: {**d, "weights": ["x"] * N_FEATURES}, "malformed"),
+        (lambda d: {**d, "context_frames": [6, 1]}, "weights must be"),
+        (lambda d: {**d, "context_frames": [-1, 0]}, "context_frames must be"),
+        (lambda d: {**d, "weights": ["x"] * len(d["weights"])}, "malformed"),
         (lambda d: {k: v for k, v in d.items() if k != "bias"}, "malformed"),
     ],
 )

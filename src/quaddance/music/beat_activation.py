@@ -29,29 +29,36 @@ from quaddance.errors import InputFileError
 FORMAT = "quaddance-beat-activation-1"
 N_BANDS = 8
 """Mel bands of the activation's input: the analyser's mel bands in 8 equal groups."""
-CONTEXT_FRAMES = 3
-"""Frames on each side of a frame that the activation sees (70 ms at 43 frames/s)."""
-N_FEATURES = 2 * N_BANDS * (2 * CONTEXT_FRAMES + 1)
+CONTEXT = (3, 3)
+"""Frames before and after a frame that the activation sees (70 ms each at 43 frames/s)."""
+
+
+def n_features(context: tuple[int, int]) -> int:
+    """Inputs of a model that sees ``context`` (before, after) frames around each frame."""
+    return 2 * N_BANDS * (context[0] + context[1] + 1)
 
 
 def band_flux(flux_db: np.ndarray, flux_log: np.ndarray) -> np.ndarray:
-    """(2 * N_BANDS, n) mean dB flux, then mean log1p flux, of each group of mel bands.
+    """(2 * N_BANDS, ...) mean dB flux, then mean log1p flux, of each group of mel bands.
 
     Args:
-        flux_db: (n_mels, n) half-wave rectified flux of the dB mel spectrogram.
-        flux_log: (n_mels, n) the same of the log1p-compressed mel spectrogram.
+        flux_db: (n_mels, ...) half-wave rectified flux of the dB mel spectrogram.
+        flux_log: (n_mels, ...) the same of the log1p-compressed mel spectrogram.
     """
     groups = np.array_split(np.arange(flux_db.shape[0]), N_BANDS)
     return np.stack([flux[g].mean(axis=0) for flux in (flux_db, flux_log) for g in groups])
 
 
-def design_matrix(rows: np.ndarray) -> np.ndarray:
-    """(n, N_FEATURES) each frame's rows (``(2 * N_BANDS, n)``, normalised) and those of its
-    neighbours, earliest first; the edges repeat."""
+def design_matrix(rows: np.ndarray, context: tuple[int, int]) -> np.ndarray:
+    """(n, n_features(context)) each frame's rows (``(2 * N_BANDS, n)``, normalised) and those
+    of its ``context`` (before, after) neighbours, earliest first; the edges repeat."""
     n = rows.shape[1]
-    pad = np.pad(rows, ((0, 0), (CONTEXT_FRAMES, CONTEXT_FRAMES)), mode="edge")
-    shifts = range(2 * CONTEXT_FRAMES + 1)
-    return np.concatenate([pad[:, k : k + n] for k in shifts]).T
+    pad = np.pad(rows, ((0, 0), context), mode="edge")
+    return np.concatenate([pad[:, k : k + n] for k in range(sum(context) + 1)]).T
+
+
+def sigmoid(z: np.ndarray | float) -> np.ndarray:
+    return 1.0 / (1.0 + np.exp(-np.clip(z, -60.0, 60.0)))
 
 
 @dataclass(frozen=True)
@@ -59,8 +66,10 @@ class BeatActivationModel:
     """The fitted weights and where they came from."""
 
     weights: np.ndarray
-    """(N_FEATURES,) logistic weights, in `design_matrix`'s column order."""
+    """(n_features(context),) logistic weights, in `design_matrix`'s column order."""
     bias: float
+    context: tuple[int, int]
+    """Frames (before, after) each frame that it sees."""
     trained_on: tuple[str, ...]
     """Names of the songs it was fitted on (tuning songs of the real-music sets)."""
     regularisation_c: float
@@ -68,14 +77,13 @@ class BeatActivationModel:
 
     def activation(self, rows: np.ndarray) -> np.ndarray:
         """(n,) beat probability of each frame from its normalised band rows."""
-        z = design_matrix(rows) @ self.weights + self.bias
-        return 1.0 / (1.0 + np.exp(-np.clip(z, -60.0, 60.0)))
+        return sigmoid(design_matrix(rows, self.context) @ self.weights + self.bias)
 
     def to_json_dict(self) -> dict[str, Any]:
         return {
             "format": FORMAT,
             "n_bands": N_BANDS,
-            "context_frames": CONTEXT_FRAMES,
+            "context_frames": list(self.context),
             "weights": [round(float(w), 6) for w in self.weights],
             "bias": round(float(self.bias), 6),
             "trained_on": list(self.trained_on),
@@ -100,21 +108,25 @@ class BeatActivationModel:
             raise InputFileError(path, f"is not a JSON file ({err})") from err
         if not isinstance(data, dict) or data.get("format") != FORMAT:
             raise InputFileError(path, f"is not a beat activation model (format {FORMAT})")
-        if data.get("n_bands") != N_BANDS or data.get("context_frames") != CONTEXT_FRAMES:
-            raise InputFileError(path, f"needs {N_BANDS} bands and {CONTEXT_FRAMES} context frames")
+        if data.get("n_bands") != N_BANDS:
+            raise InputFileError(path, f"needs {N_BANDS} bands")
         try:
             weights = np.asarray(data["weights"], dtype=float)
             bias = float(data["bias"])
+            before, after = (int(k) for k in data["context_frames"])
             trained_on = tuple(str(name) for name in data["trained_on"])
             c = float(data["regularisation_c"])
         except (KeyError, TypeError, ValueError) as err:
             raise InputFileError(path, f"has a missing or malformed field ({err})") from err
-        if weights.shape != (N_FEATURES,) or not np.all(np.isfinite(weights)):
-            raise InputFileError(path, f"weights must be {N_FEATURES} finite numbers")
+        if not (0 <= before <= 50 and 0 <= after <= 50):
+            raise InputFileError(path, "context_frames must be two counts of 0-50 frames")
+        expected = n_features((before, after))
+        if weights.shape != (expected,) or not np.all(np.isfinite(weights)):
+            raise InputFileError(path, f"weights must be {expected} finite numbers")
         if not np.isfinite(bias):
             raise InputFileError(path, "bias must be a finite number")
         weights.setflags(write=False)
-        return cls(weights, bias, trained_on, c)
+        return cls(weights, bias, (before, after), trained_on, c)
 
 
 def shipped_path() -> Path:
