@@ -89,25 +89,32 @@ def _score(song: RealSong, y: np.ndarray, cfg: analysis.AnalysisConfig) -> tuple
     )
 
 
+def _inputs(
+    songs: list[RealSong], audio: dict[str, np.ndarray]
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """Each song's band rows (`analysis.activation_rows`) and frame labels, by name."""
+    rows = {s.name: analysis.activation_rows(audio[s.name], SR_HZ) for s in songs}
+    labels = {s.name: frame_labels(s.beats_s, FPS, rows[s.name].shape[1]) for s in songs}
+    return rows, labels
+
+
 def cross_validate(
     songs: list[RealSong], audio: dict[str, np.ndarray], weights: Sequence[float]
 ) -> dict[str, dict[str, float]]:
     """Mean F (metrical level and strict) of the analyser over ``songs`` for each activation
     weight, each artist's songs scored with a model fitted without that artist."""
-    rows = {s.name: analysis.activation_rows(audio[s.name], SR_HZ) for s in songs}
-    labels = {s.name: frame_labels(s.beats_s, FPS, rows[s.name].shape[1]) for s in songs}
+    rows, labels = _inputs(songs, audio)
     scores: dict[float, list[tuple[float, float]]] = {w: [] for w in weights}
     with tempfile.TemporaryDirectory() as tmp:
-        for artist in sorted({_artist(s) for s in songs}):
+        for k, artist in enumerate(sorted({_artist(s) for s in songs})):
             train = [s.name for s in songs if _artist(s) != artist]
-            path = Path(tmp) / "fold.json"
+            path = Path(tmp) / f"fold{k}.json"  # its own file: `load_model` caches by path
             fit([rows[n] for n in train], [labels[n] for n in train], train).save(path)
             for song in (s for s in songs if _artist(s) == artist):
                 for w in weights:
                     cfg = analysis.AnalysisConfig(activation_weight=w, activation_model=path)
                     scores[w].append(_score(song, audio[song.name], cfg))
                 print(f"{artist}: {song.name} done", flush=True)
-            analysis.beat_activation.load_model.cache_clear()  # the next fold, same path
     return {
         f"{w:g}": {
             "f_metrical": round(float(np.mean([s[0] for s in v])), 4),
@@ -142,9 +149,9 @@ def main(argv: list[str] | None = None) -> None:
         print(json.dumps(scores, indent=1))
         print(f"wrote {args.cv_out}")
         return
-    rows = [analysis.activation_rows(audio[s.name], SR_HZ) for s in songs]
-    labels = [frame_labels(s.beats_s, FPS, r.shape[1]) for s, r in zip(songs, rows, strict=True)]
-    fit(rows, labels, [s.name for s in songs]).save(args.out)
+    rows, labels = _inputs(songs, audio)
+    names = [s.name for s in songs]
+    fit([rows[n] for n in names], [labels[n] for n in names], names).save(args.out)
     print(f"wrote {args.out} (fitted on {len(songs)} tuning songs)")
 
 
