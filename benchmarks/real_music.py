@@ -121,14 +121,33 @@ def _rel(root: Path) -> str:
     return str(root.resolve().relative_to(top)) if root.resolve().is_relative_to(top) else str(root)
 
 
+def _same(a: Path, b: Path) -> bool:
+    """Whether two set folders are one (``--root`` may be given relative to the checkout)."""
+    return Path(a).resolve() == Path(b).resolve()
+
+
 def build_command(root: Path) -> str:
     """The command that builds the set under ``root``."""
-    return f"python -m {MODULE} build" + ("" if root == ROOT else f" --root {_rel(root)}")
+    return f"python -m {MODULE} build" + ("" if _same(root, ROOT) else f" --root {_rel(root)}")
 
 
 class SetFileMissingError(QuaddanceError, FileNotFoundError):
     """A file of a real-music set is missing (the set not built, or a listed file gone): a
     one-line error for the benchmark commands, still a FileNotFoundError for callers."""
+
+
+def run_as_script(main: Callable[[], None]) -> None:
+    """Run a ``python -m benchmarks...`` entry point as ``quaddance`` runs a command: a
+    `QuaddanceError` (a set not built, a bad file) is one line on stderr and exit status 2."""
+    import sys
+
+    from quaddance.cli import one_line_error
+
+    try:
+        main()
+    except QuaddanceError as err:
+        print(one_line_error(err), file=sys.stderr)
+        sys.exit(2)
 
 
 def _sources_table(root: Path) -> dict[str, Any]:
@@ -167,7 +186,7 @@ def load_manifest(root: Path = ROOT) -> dict[str, Any]:
     """The manifest of the set under ``root`` (``build`` writes it)."""
     path = root / MANIFEST_NAME
     if not path.is_file():
-        need = f"{LMMS_INSTALL_HINT}; " if root == LMMS_ROOT else ""
+        need = f"{LMMS_INSTALL_HINT}; " if _same(root, LMMS_ROOT) else ""
         raise SetFileMissingError(
             f"no real-music manifest at {path}: run `{need}{build_command(root)}`"
         )
@@ -1036,4 +1055,4 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_as_script(main)

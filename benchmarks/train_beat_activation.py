@@ -24,7 +24,13 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.beats import beat_f_measure, metrical_level_f_measure
-from benchmarks.real_music import REAL_SET_ROOTS, RealSong, load_audio_at, load_songs
+from benchmarks.real_music import (
+    REAL_SET_ROOTS,
+    RealSong,
+    load_audio_at,
+    load_songs,
+    run_as_script,
+)
 from quaddance.fileio import write_json
 from quaddance.music import analysis
 from quaddance.music.beat_activation import (
@@ -156,4 +162,4 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_as_script(main)

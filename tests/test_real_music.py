@@ -234,3 +234,21 @@ def test_real_music_commands_take_the_sets_root(monkeypatch, tmp_path: Path) -> 
     real_music.main(["bench", "--root", str(lmms), "--out", str(tmp_path / "b.json")])
     real_music.main(["bench", "--out", str(tmp_path / "b.json")])
     assert calls == [("build", lmms), ("check", lmms), ("bench", lmms), ("bench", real_music.ROOT)]
+
+
+def test_a_set_not_built_is_one_line_and_exit_2_from_the_scripts(
+    tmp_path: Path, capsys, monkeypatch
+) -> None:
+    import benchmarks.real_music as real_music
+
+    with pytest.raises(SystemExit) as stop:
+        real_music.run_as_script(lambda: load_manifest(tmp_path))
+    assert stop.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("quaddance: error: no real-music manifest at")
+    assert f"--root {tmp_path}" in err[0]
+    # The LMMS part named relative to where the command runs still says how to install LMMS.
+    monkeypatch.setattr(real_music, "LMMS_ROOT", tmp_path / "lmms")
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(FileNotFoundError, match="apt-get install lmms"):
+        load_manifest(Path("lmms"))
