@@ -105,3 +105,29 @@ def test_a_missing_model_file_stops_the_analysis_with_its_name(tmp_path: Path) -
     with pytest.raises(InputFileError, match=r"absent\.json"):
         analysis.analyze(y, SR_HZ, cfg)
     beat_activation.load_model.cache_clear()
+
+
+def test_the_fit_and_cross_validation_commands_write_their_files(tmp_path, monkeypatch) -> None:
+    import benchmarks.train_beat_activation as tba
+    from benchmarks.real_music import RealSong
+
+    songs, audio = [], {}
+    for k, (tempo, artist) in enumerate(((100.0, "A"), (128.0, "B"), (116.0, "B (band)"))):
+        y, truth = render_song(tempo, 12.0, seed=k)
+        name = f"song{k}"
+        audio[name] = y
+        songs.append(
+            RealSong(name, name, artist, "tuning", "recording", tmp_path / f"{name}.ogg",
+                     truth.beats_s, truth.downbeats_s, (tempo, tempo), "4/4", "MIT", 12.0)
+        )  # fmt: skip
+    monkeypatch.setattr(tba, "tuning_songs", lambda: songs)
+    monkeypatch.setattr(tba, "load_audio_at", lambda song, sr: audio[song.name])
+    model_path, cv_path = tmp_path / "model.json", tmp_path / "cv.json"
+    tba.main(["--out", str(model_path)])
+    assert BeatActivationModel.load(model_path).trained_on == ("song0", "song1", "song2")
+    tba.main(["--cross-validate", "--weights", "0", "0.5", "--cv-out", str(cv_path)])
+    cv = json.loads(cv_path.read_text())
+    assert cv["songs"] == ["song0", "song1", "song2"]
+    assert set(cv["by_activation_weight"]) == {"0", "0.5"}
+    for scores in cv["by_activation_weight"].values():
+        assert 0.5 < scores["f_metrical"] <= 1.0 and 0.0 <= scores["f"] <= 1.0
