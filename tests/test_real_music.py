@@ -252,3 +252,92 @@ def test_a_set_not_built_is_one_line_and_exit_2_from_the_scripts(
     monkeypatch.chdir(tmp_path)
     with pytest.raises(FileNotFoundError, match="apt-get install lmms"):
         load_manifest(Path("lmms"))
+    # So does the fitting set, which has LMMS songs too.
+    monkeypatch.setattr(real_music, "FIT_ROOT", tmp_path / "fit")
+    with pytest.raises(FileNotFoundError, match=r"apt-get install lmms; .* --root .*fit"):
+        load_manifest(Path("fit"))
+
+
+# --- the fitting songs (benchmarks/real_music_fit: sources committed, audio built) -----------
+
+
+def _wad(path: Path, lumps: dict[str, bytes]) -> Path:
+    """A minimal Doom WAD: header, the lumps' bytes, then the directory."""
+    import struct
+
+    body, entries, offset = b"", b"", 12
+    for name, data in lumps.items():
+        entries += struct.pack("<ii8s", offset, len(data), name.encode())
+        body, offset = body + data, offset + len(data)
+    path.write_bytes(struct.pack("<4sii", b"IWAD", len(lumps), offset) + body + entries)
+    return path
+
+
+def _midi_bytes(tmp_path: Path, bpm: float, n_beats: int) -> bytes:
+    """A MIDI song: a kick on each of ``n_beats`` quarter notes at ``bpm``, in 3/4."""
+    mido = pytest.importorskip("mido")
+    midi = mido.MidiFile(ticks_per_beat=96)
+    track = mido.MidiTrack()
+    track.append(mido.MetaMessage("time_signature", numerator=3, denominator=4, time=0))
+    track.append(mido.MetaMessage("set_tempo", tempo=mido.bpm2tempo(bpm), time=0))
+    for k in range(n_beats):
+        track.append(
+            mido.Message("note_on", channel=9, note=36, velocity=120, time=0 if k == 0 else 48)
+        )
+        track.append(mido.Message("note_off", channel=9, note=36, velocity=0, time=48))
+    midi.tracks.append(track)
+    path = tmp_path / "song.mid"
+    midi.save(str(path))
+    return path.read_bytes()
+
+
+def test_wad_lump_reads_the_named_lump_and_refuses_other_files(tmp_path: Path) -> None:
+    from benchmarks.real_music import wad_lump
+
+    wad = _wad(tmp_path / "a.wad", {"MAP01": b"\1\2", "D_RUNNIN": b"MThd...", "D_END": b""})
+    assert wad_lump(wad, "D_RUNNIN") == b"MThd..."
+    assert wad_lump(wad, "MAP01") == b"\1\2"
+    with pytest.raises(ValueError, match=r"a\.wad: no lump named D_OTHER"):
+        wad_lump(wad, "D_OTHER")
+    not_wad = tmp_path / "b.wad"
+    not_wad.write_bytes(b"PK\3\4" + bytes(20))
+    with pytest.raises(ValueError, match=r"b\.wad: not a WAD file"):
+        wad_lump(not_wad, "D_RUNNIN")
+
+
+def test_a_wad_midi_song_is_rendered_with_its_tempo_maps_beats(tmp_path: Path) -> None:
+    from benchmarks.real_music import SongSource, _build_wad_midi_render
+
+    package = tmp_path / "pkg"
+    (package / "games").mkdir(parents=True)
+    midi = _midi_bytes(tmp_path, bpm=150.0, n_beats=12)
+    _wad(package / "games" / "x.wad", {"D_SONG": midi, "D_TEXT": b"not midi"})
+    src = SongSource("x_song", "x", "games/x.wad:D_SONG", "Song", "A", "MIT", "tuning", "")
+    assert src.kind == "wad_midi_render"
+    root = tmp_path / "set"
+    entry = _build_wad_midi_render(src, package, root)
+    beats = np.loadtxt(root / entry["beats"])
+    # A kick on each quarter note at 150 BPM: beats every 0.4 s over the audible span.
+    assert len(beats) >= 10 and beats[0] < 0.05
+    np.testing.assert_allclose(np.diff(beats), 0.4, atol=1e-6)
+    assert entry["meter"] == "3/4" and entry["tempo_bpm"] == [150.0, 150.0]
+    assert (root / entry["audio"]).is_file()
+    text = SongSource("x_text", "x", "games/x.wad:D_TEXT", "T", "A", "MIT", "tuning", "")
+    with pytest.raises(ValueError, match="not a MIDI lump"):
+        _build_wad_midi_render(text, package, root)
+
+
+def test_fitting_songs_hold_no_held_out_song_or_artist() -> None:
+    from benchmarks.real_music import FIT_ROOT, LMMS_ROOT
+
+    songs, reason = read_sources(FIT_ROOT)
+    assert reason and len(songs) >= 40
+    assert {s.split for s in songs} == {"tuning"}  # for fitting only
+    assert all(s.kind in KINDS and s.licence in LICENCES for s in songs)
+    others = [s for root in (ROOT, LMMS_ROOT) for s in read_sources(root)[0]]
+    held_out_artists = {s.artist for s in others if s.split == "heldout"}
+    assert not {s.artist for s in songs} & held_out_artists
+    assert len({s.name for s in [*songs, *others]}) == len(songs) + len(others)
+    assert len({s.path for s in [*songs, *others]}) == len(songs) + len(others)
+    licences = (FIT_ROOT / "LICENCES.md").read_text()
+    assert all(s.name.split("_")[0] in licences for s in songs)

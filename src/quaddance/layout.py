@@ -42,3 +42,7 @@ MODES: tuple[str, ...] = ("feasible", "paper", "minmax")
 
 #: Beats in a bar: 4/4 is assumed, as nearly all dance music is in four.
 BEATS_PER_BAR = 4
+#: The dance range, BPM: the beat level that the offline analyser and the online tracker report
+#: lies in it, and the training bank's songs (`quaddance.pipeline.BANK_TEMPO_BPM`) are drawn
+#: from it. A song outside it is danced at its half or double tempo.
+DANCE_TEMPO_BPM = (60.0, 180.0)

@@ -31,6 +31,7 @@ from quaddance.layout import (
     BODY,
     BODY_COLUMNS,
     CHOREO_FPS,
+    DANCE_TEMPO_BPM,
     FRONT_PAWS,
     N_BODY,
     PAWS,
@@ -52,9 +53,10 @@ if TYPE_CHECKING:
     from quaddance.music.beat_file import BeatList
     from quaddance.robots import RobotCfg
 
-#: Tempo range of the training bank, BPM: dance music is mostly 80-135 (AIST++ 80-130),
-#: widened so that octave errors of a beat tracker stay inside what the policy has seen.
-BANK_TEMPO_BPM = (80.0, 160.0)
+#: Tempo range of the training bank, BPM: the dance range, in which both beat trackers report
+#: the beat level (dance music is mostly 80-135, AIST++ 80-130), so that a policy has seen
+#: every tempo it is asked to dance.
+BANK_TEMPO_BPM = DANCE_TEMPO_BPM
 
 
 @dataclass(frozen=True)

@@ -7,14 +7,17 @@ Ellis 2007) with the changes that matter for dance music:
    intro counts as much as a loud chorus: one for tempo (dB flux, full band + kick/bass band)
    and one for placing beats (dB flux + treble flux with gentler compression, where snare, hats
    and cymbals make drum hits stand out from off-beat bass notes and chord stabs). Half of
-   each is a learned beat activation (`music.beat_activation`, fitted on real music with exact
-   beats), which tells the bands that carry the beat from those that carry off-beats.
+   the first and 70 % of the second is a learned beat activation (`music.beat_activation`,
+   fitted on real music with exact beats), which tells the bands that carry the beat from
+   those that carry off-beats.
 2. The tempo is the lag whose first four multiples carry the most autocorrelation (which rules
-   out the "2/3 tempo" error), times a broad log-normal prior centred in the dance range
-   (80-160 BPM), which settles the half/double-tempo choice where the music leaves it open:
-   octave errors dominate beat-tracking errors (FACTS.md §4).
+   out the "2/3 tempo" error), times a broad log-normal prior centred on the usual dance
+   tempi (80-160 BPM), which settles the half/double-tempo choice where the music leaves it
+   open: octave errors dominate beat-tracking errors (FACTS.md §4). Only tempi in the dance
+   range (`DANCE_TEMPO_BPM`, 60-180 BPM) are considered.
 3. The tempo may change: a local tempo curve (Viterbi over windowed autocorrelation near the
-   global tempo, with drift and jumps) guides the dynamic program.
+   global tempo and inside the dance range, with drift and jumps) guides the dynamic
+   program.
 4. Swing: beats that landed on swung off-beats are moved back onto the beat.
    Off-beats: beats move by half a beat when the bass line changes pitch at their midpoints
    rather than at them (off-beat hats, skanking keys pull the tracker; harmony does not move).
@@ -39,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from quaddance.errors import InputFileError
-from quaddance.layout import BEATS_PER_BAR
+from quaddance.layout import BEATS_PER_BAR, DANCE_TEMPO_BPM
 from quaddance.music import beat_activation
 
 MIN_BEAT_GAP_S = 0.2
@@ -72,12 +75,12 @@ class AnalysisConfig:
     """Gain inside log1p(gain * mel / max) of the treble onset: about 50 dB of range."""
     local_norm_s: float = 3.0
     """Window of the local level that the onset envelope is divided by, seconds."""
-    min_bpm: float = 50.0
-    """Slowest tempo considered, BPM."""
-    max_bpm: float = 220.0
-    """Fastest tempo considered, BPM."""
+    min_bpm: float = DANCE_TEMPO_BPM[0]
+    """Slowest tempo considered, BPM, of the global tempo and of the local tempo path."""
+    max_bpm: float = DANCE_TEMPO_BPM[1]
+    """Fastest tempo considered, BPM, of the global tempo and of the local tempo path."""
     prior_center_bpm: float = 120.0
-    """Centre of the tempo prior: the middle of the dance range 80-160 BPM (FACTS.md §4)."""
+    """Centre of the tempo prior: the middle of the usual dance tempi 80-160 BPM (FACTS.md §4)."""
     prior_sigma_octaves: float = 1.2
     """Width of the log-normal tempo prior, octaves (tuned)."""
     tempo_harmonics: int = 4
@@ -102,7 +105,7 @@ class AnalysisConfig:
     """... and at least this much stronger than the quarter-beat positions, so that a steady
     stream of notes (an arpeggio) does not count as a backbeat (tuned)."""
     max_doubled_bpm: float = 165.0
-    """Doubling stops here: the top of the dance range 80-160 BPM plus a margin."""
+    """Doubling stops here: the top of the usual dance tempi 80-160 BPM plus a margin."""
     tightness: float = 300.0
     """Penalty on beat intervals off the local period (librosa's 100 is looser; our local
     tempo curve already follows tempo changes; tuned)."""
@@ -112,10 +115,13 @@ class AnalysisConfig:
     """Shortest section, bars."""
     section_threshold: float = 1.0
     """Novelty a boundary needs; one unit = 3 dB louder or 50 % more onsets (tuned)."""
-    activation_weight: float = 0.5
-    """Share of the learned beat activation (`music.beat_activation`) in both onset envelopes;
-    0 leaves them as measured. Chosen by leaving one artist out of the tuning songs of the
-    real-music sets at a time (``python -m benchmarks.train_beat_activation --cross-validate``)."""
+    activation_tempo_weight: float = 0.5
+    """Share of the learned beat activation (`music.beat_activation`) in the tempo envelope;
+    0 leaves it as measured."""
+    activation_beat_weight: float = 0.7
+    """Its share in the beat-placement envelope. Both chosen by leaving one artist out of the
+    tuning songs of the real-music sets at a time (``python -m benchmarks.train_beat_activation
+    --cross-validate``)."""
     activation_model: Path | None = None
     """The activation's weights file; None: the shipped ``data/beat_activation.json``."""
 
@@ -294,12 +300,12 @@ def _features(y: np.ndarray, sr: int, cfg: AnalysisConfig) -> _Features:
     )
     bands = beat_activation.band_flux(flux_db, flux_log)
     band_rows = np.log1p(np.stack([_local_normalise(row, fps, cfg) for row in bands]))
-    if cfg.activation_weight > 0.0:
+    if cfg.activation_tempo_weight > 0.0 or cfg.activation_beat_weight > 0.0:
         model = beat_activation.load_model(cfg.activation_model)
         act = unit_mean(_local_normalise(model.activation(band_rows), fps, cfg))
-        w = cfg.activation_weight
-        tempo_onset = (1.0 - w) * unit_mean(tempo_onset) + w * act
-        beat_onset = (1.0 - w) * unit_mean(beat_onset) + w * act
+        w_tempo, w_beat = cfg.activation_tempo_weight, cfg.activation_beat_weight
+        tempo_onset = (1.0 - w_tempo) * unit_mean(tempo_onset) + w_tempo * act
+        beat_onset = (1.0 - w_beat) * unit_mean(beat_onset) + w_beat * act
     rms = rms_from_stft(stft, cfg.n_fft)
     chroma = normalize_peak(banks.chroma @ power, axis=0)
     bass = (banks.freqs_hz >= 30.0) & (banks.freqs_hz <= cfg.bass_chroma_max_hz)
@@ -313,7 +319,11 @@ def _features(y: np.ndarray, sr: int, cfg: AnalysisConfig) -> _Features:
 def activation_rows(y: np.ndarray, sr: int, cfg: AnalysisConfig | None = None) -> np.ndarray:
     """(16, n) the learned beat activation's input rows for mono audio ``y``, one column per
     onset frame (what ``python -m benchmarks.train_beat_activation`` fits on)."""
-    cfg = AnalysisConfig(activation_weight=0.0) if cfg is None else cfg
+    cfg = (
+        AnalysisConfig(activation_tempo_weight=0.0, activation_beat_weight=0.0)
+        if cfg is None
+        else cfg
+    )
     return _features(np.asarray(y, dtype=np.float32), sr, cfg).band_rows
 
 
@@ -382,8 +392,11 @@ def _local_period(
     win = round(cfg.tempo_window_s * fps)
     if n < 2 * win:
         return np.full(n, period)
-    # Candidate periods on a log grid of 1 % steps around the global period.
+    # Candidate periods on a log grid of 1 % steps around the global period, inside the
+    # tempo range (so that the beats' level stays in it).
     log_ratio = np.arange(-np.log(cfg.max_tempo_ratio), np.log(cfg.max_tempo_ratio), 0.01)
+    bpm = tempo_bpm * np.exp(-log_ratio)
+    log_ratio = log_ratio[(bpm >= cfg.min_bpm) & (bpm <= cfg.max_bpm)]
     periods = period * np.exp(log_ratio)
     hop = max(1, round(fps / 4))
     centers = np.arange(win // 2, n - win + win // 2 + 1, hop)

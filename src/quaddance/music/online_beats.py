@@ -11,7 +11,8 @@ bass chroma of item 5):
 2. Tempo, every 0.25 s: the harmonic autocorrelation salience of the last ``TEMPO_WINDOW_S`` of
    the tempo envelope (the same "lag whose multiples line up" score and log-normal prior as the
    offline analyser, which prefers the true tempo to half tempo in the dance range), followed
-   by an online Viterbi filter over a log-tempo grid: tempo drifts cheaply and jumps at a fixed
+   by an online Viterbi filter over a log-tempo grid spanning the dance range (the
+   analyser's `DANCE_TEMPO_BPM`, 60-180 BPM): tempo drifts cheaply and jumps at a fixed
    cost; a recent-weighted window lets a tempo change win within a few seconds (a shorter
    one once the beats start missing their onsets), and the beat score is then recomputed on
    the new period so the beats move onto the new grid at once.
@@ -93,7 +94,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from quaddance.layout import BEATS_PER_BAR
+from quaddance.layout import BEATS_PER_BAR, DANCE_TEMPO_BPM
 from quaddance.music.analysis import (
     MIN_BEAT_GAP_S,
     SWING_FRACTIONS,
@@ -146,11 +147,11 @@ HIGH_BAND_HZ = 3000.0
 CHORD_BAND_HZ = (200.0, 2000.0)
 """Band where chord changes are looked for (downbeats), Hz."""
 
-MIN_BPM, MAX_BPM = 55.0, 215.0
-"""Tempo search range, BPM: the dance range 60-200 with a margin for the Viterbi grid."""
+MIN_BPM, MAX_BPM = DANCE_TEMPO_BPM
+"""Tempo search range, BPM: the dance range, the offline analyser's."""
 PRIOR_CENTER_BPM = 120.0
 PRIOR_SIGMA_OCTAVES = 1.2
-"""Log-normal tempo prior: the offline analyser's (centre of the dance range 80-160 BPM)."""
+"""Log-normal tempo prior: the offline analyser's (centre of the usual dance tempi 80-160 BPM)."""
 TEMPO_HARMONICS = 4
 TEMPO_WINDOW_S = 8.0
 """Autocorrelation window of the tempo estimate, seconds."""
@@ -674,7 +675,13 @@ class _Listener:
         self._n_frames = 0  # frames processed since the start
         self._time_s = 0.0
         # Tempo grid (log spaced) and its online Viterbi filter.
-        self._log_bpm = np.arange(np.log(MIN_BPM), np.log(MAX_BPM), TEMPO_GRID_STEP)
+        # Anchored on the prior's centre, 120 BPM, so that the commonest dance tempo lies on a
+        # grid point (0.5 % off, a 120 BPM click track locked a beat later at some phases).
+        k = np.arange(
+            np.ceil(np.log(MIN_BPM / PRIOR_CENTER_BPM) / TEMPO_GRID_STEP),
+            np.floor(np.log(MAX_BPM / PRIOR_CENTER_BPM) / TEMPO_GRID_STEP) + 1,
+        )
+        self._log_bpm = np.log(PRIOR_CENTER_BPM) + TEMPO_GRID_STEP * k
         steps = np.arange(len(self._log_bpm))
         drift = -0.5 * ((steps[:, None] - steps[None, :]) / TEMPO_DRIFT_STEPS) ** 2
         self._trans = np.maximum(drift, -TEMPO_JUMP_COST)
