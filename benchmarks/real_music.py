@@ -61,9 +61,6 @@ LMMS_ROOT = Path(__file__).resolve().parent / "real_music_lmms"
 audio would pass the set's 50 MB); only its sources and licences are."""
 REAL_SET_ROOTS = {"real": ROOT, "real-lmms": LMMS_ROOT}
 """The real-music sets by their name in ``bench beats --sets`` / ``bench live --sets``."""
-FIT_ROOT = Path(__file__).resolve().parent / "real_music_fit"
-"""Songs for fitting only (the learned beat activation), none held out and no artist of a
-held-out song: built (``build --root``), not committed, like the LMMS part."""
 MANIFEST_NAME = "manifest.json"
 SPLITS = ("tuning", "heldout")
 AUDIO_SR_HZ = 44100
@@ -73,7 +70,7 @@ OGG_QUALITY = 0.5
 SILENCE_DB = -40.0
 """Beats are kept from where the music is first louder than this, dB below the song's peak
 (50 ms RMS frames), to where it last is: there is nothing to hear before and after."""
-KINDS = ("recording", "midi_render", "lmms_render", "wad_midi_render")
+KINDS = ("recording", "midi_render", "lmms_render")
 
 LICENCES = {
     "CC-BY-SA-3.0": "https://creativecommons.org/licenses/by-sa/3.0/",
@@ -83,7 +80,6 @@ LICENCES = {
     "Artistic-2.0": "https://opensource.org/license/artistic-2-0",
     "CC-BY-SA-4.0": "https://creativecommons.org/licenses/by-sa/4.0/",
     "BSD-2-Clause": "https://opensource.org/license/bsd-2-clause",
-    "BSD-3-Clause": "https://opensource.org/license/bsd-3-clause",
 }
 
 
@@ -93,7 +89,7 @@ class SongSource:
 
     name: str
     package: str  # Debian package
-    path: str  # the song's folder (recording), MIDI file, LMMS project or WAD:lump in the package
+    path: str  # the song's folder (recording), MIDI file or LMMS project in the package
     title: str
     artist: str
     licence: str  # a key of LICENCES
@@ -104,8 +100,6 @@ class SongSource:
     def kind(self) -> str:
         if self.path.endswith((".mmp", ".mmpz")):
             return "lmms_render"
-        if ".wad:" in self.path:
-            return "wad_midi_render"
         return "midi_render" if self.path.endswith(".mid") else "recording"
 
 
@@ -192,9 +186,7 @@ def load_manifest(root: Path = ROOT) -> dict[str, Any]:
     """The manifest of the set under ``root`` (``build`` writes it)."""
     path = root / MANIFEST_NAME
     if not path.is_file():
-        need = (
-            f"{LMMS_INSTALL_HINT}; " if any(_same(root, r) for r in (LMMS_ROOT, FIT_ROOT)) else ""
-        )
+        need = f"{LMMS_INSTALL_HINT}; " if _same(root, LMMS_ROOT) else ""
         raise SetFileMissingError(
             f"no real-music manifest at {path}: run `{need}{build_command(root)}`"
         )
@@ -513,10 +505,11 @@ def _build_recording(src: SongSource, package_dir: Path, root: Path) -> dict[str
     return entry
 
 
-def _midi_song(src: SongSource, midi_path: Path, root: Path) -> dict[str, Any]:
+def _build_midi_render(src: SongSource, package_dir: Path, root: Path) -> dict[str, Any]:
     from benchmarks.beats import find_soundfont, render_midi
     from quaddance.music.audio import load_audio
 
+    midi_path = package_dir / src.path
     with tempfile.TemporaryDirectory(prefix="quaddance-render-") as tmp:
         wav = Path(tmp) / "render.wav"
         render_midi(midi_path, wav, find_soundfont(), AUDIO_SR_HZ)
@@ -533,37 +526,6 @@ def _midi_song(src: SongSource, midi_path: Path, root: Path) -> dict[str, Any]:
         "over the audible span"
     )
     return entry
-
-
-def _build_midi_render(src: SongSource, package_dir: Path, root: Path) -> dict[str, Any]:
-    return _midi_song(src, package_dir / src.path, root)
-
-
-def wad_lump(wad: Path, name: str) -> bytes:
-    """The bytes of lump ``name`` of a Doom WAD file (a 12-byte header: "IWAD"/"PWAD", the
-    lump count and the directory's offset; then 16-byte entries: offset, size, 8-byte name)."""
-    import struct
-
-    data = wad.read_bytes()
-    magic, count, directory = struct.unpack_from("<4sii", data)
-    if magic not in (b"IWAD", b"PWAD"):
-        raise ValueError(f"{wad}: not a WAD file")
-    for i in range(count):
-        offset, size, raw = struct.unpack_from("<ii8s", data, directory + 16 * i)
-        if raw.rstrip(b"\0").decode("ascii", "replace") == name:
-            return data[offset : offset + size]
-    raise ValueError(f"{wad}: no lump named {name}")
-
-
-def _build_wad_midi_render(src: SongSource, package_dir: Path, root: Path) -> dict[str, Any]:
-    wad, lump = src.path.rsplit(":", 1)
-    data = wad_lump(package_dir / wad, lump)
-    if not data.startswith(b"MThd"):
-        raise ValueError(f"{src.path}: not a MIDI lump")
-    with tempfile.TemporaryDirectory(prefix="quaddance-wad-") as tmp:
-        midi_path = Path(tmp) / f"{lump}.mid"
-        midi_path.write_bytes(data)
-        return _midi_song(src, midi_path, root)
 
 
 def _lmms_version() -> str:
@@ -613,8 +575,7 @@ def build(root: Path = ROOT, debs: dict[str, Path] | None = None) -> dict[str, A
                 ["dpkg-deb", "-x", str(debs[package]), str(tmp_dir / package)], check=True
             )
         builders = {"recording": _build_recording, "midi_render": _build_midi_render,
-                    "lmms_render": _build_lmms_render,
-                    "wad_midi_render": _build_wad_midi_render}  # fmt: skip
+                    "lmms_render": _build_lmms_render}  # fmt: skip
         for i, src in enumerate(songs, 1):
             print(f"{src.name} ({i}/{len(songs)}, {src.kind})", flush=True)  # minutes in all
             build_song = builders[src.kind]
@@ -1063,7 +1024,7 @@ def main(argv: list[str] | None = None) -> None:
     m.add_argument("--results", type=Path, default=Path("benchmarks/results/beats_real.json"))
     m.add_argument("--out", type=Path, default=Path("docs/results/beats_real.md"))
     for p in (b, c, r):
-        sets = f"{_rel(ROOT)}, {_rel(LMMS_ROOT)} or {_rel(FIT_ROOT)}"
+        sets = f"{_rel(ROOT)} or {_rel(LMMS_ROOT)}"
         p.add_argument("--root", type=Path, default=ROOT,
                        help=f"the set's folder (its sources.toml): {sets}")  # fmt: skip
     args = parser.parse_args(argv)

@@ -1,23 +1,16 @@
 """Fit the analyser's learned beat activation (`quaddance.music.beat_activation`).
 
 It is fitted on the ``tuning`` songs of both real-music sets (``benchmarks/real_music`` and
-``benchmarks/real_music_lmms``), never on the held-out ones, and on the fitting songs
-(``benchmarks/real_music_fit``: none held out, no artist of a held-out song). Build the last
-two with ``apt-get install lmms fluidsynth fluid-soundfont-gm`` and ``python -m
-benchmarks.real_music build --root benchmarks/real_music_lmms`` (and ``--root
-benchmarks/real_music_fit``). Each onset frame within one frame (23 ms) of a beat is a positive
-example, every other frame a negative one, the two classes weighted equally (scikit-learn's
-logistic regression).
+``benchmarks/real_music_lmms``; build the second with ``apt-get install lmms; python -m
+benchmarks.real_music build --root benchmarks/real_music_lmms``), never on the held-out ones.
+Each onset frame within one frame (23 ms) of a beat is a positive example, every other frame a
+negative one, the two classes weighted equally (scikit-learn's logistic regression).
 
-``--cross-validate`` measures the analyser (F at its metrical level, +-70 ms) on the sets'
-tuning songs with each share of the activation (``--weights`` in the beat-placement envelope,
-``--tempo-weights`` in the tempo envelope), leaving one artist out of the fit at a time and
-scoring that artist's songs: how ``AnalysisConfig.activation_tempo_weight`` and
-``activation_beat_weight`` were chosen. The fitting songs are in every fold's fit and are never
-scored.
+``--cross-validate`` measures the analyser (F at its metrical level, +-70 ms) with each
+``--weights`` share of the activation, leaving one artist of the tuning songs out of the fit at
+a time and scoring that artist's songs: how ``AnalysisConfig.activation_weight`` was chosen.
 
     python -m benchmarks.train_beat_activation [--out FILE] [--cross-validate]
-        [--weights W ...] [--tempo-weights W ...] [--cv-out FILE] [--without-fitting-songs]
 """
 
 from __future__ import annotations
@@ -32,7 +25,6 @@ import numpy as np
 
 from benchmarks.beats import beat_f_measure, metrical_level_f_measure
 from benchmarks.real_music import (
-    FIT_ROOT,
     REAL_SET_ROOTS,
     RealSong,
     load_audio_at,
@@ -91,11 +83,6 @@ def tuning_songs() -> list[RealSong]:
     return [s for root in REAL_SET_ROOTS.values() for s in load_songs(root, ("tuning",))]
 
 
-def fitting_songs() -> list[RealSong]:
-    """The songs for fitting only (`FIT_ROOT`)."""
-    return load_songs(FIT_ROOT, ("tuning",))
-
-
 def _artist(song: RealSong) -> str:
     return song.artist.split("(")[0].strip()
 
@@ -118,36 +105,28 @@ def _inputs(
 
 
 def cross_validate(
-    songs: list[RealSong],
-    audio: dict[str, np.ndarray],
-    shares: Sequence[tuple[float, float]],
-    extra: Sequence[RealSong] = (),
+    songs: list[RealSong], audio: dict[str, np.ndarray], weights: Sequence[float]
 ) -> dict[str, dict[str, float]]:
-    """Mean F (metrical level and strict) of the analyser over ``songs`` for each pair of the
-    activation's shares (tempo, beat placement), each artist's songs scored with a model
-    fitted without that artist (and with the ``extra`` songs, which are not scored)."""
-    rows, labels = _inputs([*songs, *extra], audio)
-    scores: dict[tuple[float, float], list[tuple[float, float]]] = {w: [] for w in shares}
+    """Mean F (metrical level and strict) of the analyser over ``songs`` for each activation
+    weight, each artist's songs scored with a model fitted without that artist."""
+    rows, labels = _inputs(songs, audio)
+    scores: dict[float, list[tuple[float, float]]] = {w: [] for w in weights}
     with tempfile.TemporaryDirectory() as tmp:
         for k, artist in enumerate(sorted({_artist(s) for s in songs})):
-            train = [s.name for s in [*songs, *extra] if _artist(s) != artist]
+            train = [s.name for s in songs if _artist(s) != artist]
             path = Path(tmp) / f"fold{k}.json"  # its own file: `load_model` caches by path
             fit([rows[n] for n in train], [labels[n] for n in train], train).save(path)
             for song in (s for s in songs if _artist(s) == artist):
-                for w_tempo, w_beat in shares:
-                    cfg = analysis.AnalysisConfig(
-                        activation_tempo_weight=w_tempo,
-                        activation_beat_weight=w_beat,
-                        activation_model=path,
-                    )
-                    scores[w_tempo, w_beat].append(_score(song, audio[song.name], cfg))
+                for w in weights:
+                    cfg = analysis.AnalysisConfig(activation_weight=w, activation_model=path)
+                    scores[w].append(_score(song, audio[song.name], cfg))
                 print(f"{artist}: {song.name} done", flush=True)
     return {
-        f"tempo {w_tempo:g}, beat {w_beat:g}": {
+        f"{w:g}": {
             "f_metrical": round(float(np.mean([s[0] for s in v])), 4),
             "f": round(float(np.mean([s[1] for s in v])), 4),
         }
-        for (w_tempo, w_beat), v in scores.items()
+        for w, v in scores.items()
     }
 
 
@@ -155,58 +134,31 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog=f"python -m {MODULE}", description=__doc__.split("\n")[0])
     parser.add_argument("--out", type=Path, default=shipped_path(), help="model file to write")
     parser.add_argument("--cross-validate", action="store_true", help="score weights, fit nothing")
-    parser.add_argument(
-        "--weights",
-        type=float,
-        nargs="+",
-        default=[0.0, 0.5, 0.7, 0.8, 1.0],
-        help="the activation's shares in the beat-placement envelope to score",
-    )
-    parser.add_argument(
-        "--tempo-weights",
-        type=float,
-        nargs="+",
-        default=None,
-        help="its shares in the tempo envelope (default: the same as each --weights)",
-    )
+    parser.add_argument("--weights", type=float, nargs="+", default=[0.0, 0.3, 0.5, 0.7, 1.0])
     parser.add_argument("--cv-out", type=Path, default=Path(CV_RESULTS), help="its results")
-    parser.add_argument(
-        "--without-fitting-songs", action="store_true", help="the sets' tuning songs alone"
-    )
     args = parser.parse_args(argv)
-    songs, extra = tuning_songs(), [] if args.without_fitting_songs else fitting_songs()
-    audio = {s.name: load_audio_at(s, SR_HZ) for s in [*songs, *extra]}
+    songs = tuning_songs()
+    audio = {s.name: load_audio_at(s, SR_HZ) for s in songs}
     if args.cross_validate:
-        if args.tempo_weights is None:
-            shares = [(w, w) for w in args.weights]
-        else:
-            shares = [(t, w) for t in args.tempo_weights for w in args.weights]
-        scores = cross_validate(songs, audio, shares, extra)
+        scores = cross_validate(songs, audio, args.weights)
         write_json(
             args.cv_out,
             {
                 "benchmark": "beat_activation_cv",
-                "command": " ".join(
-                    [f"python -m {MODULE} --cross-validate --weights"]
-                    + [f"{w:g}" for w in args.weights]
-                    + (["--tempo-weights"] if args.tempo_weights else [])
-                    + [f"{w:g}" for w in args.tempo_weights or ()]
-                    + (["--without-fitting-songs"] if args.without_fitting_songs else [])
-                ),
+                "command": f"python -m {MODULE} --cross-validate",
                 "metric": "mean beat F of the analyser, +-70 ms, metrical level and strict; "
                 "each artist scored with a model fitted without that artist",
                 "songs": [s.name for s in songs],
-                "fitting_songs": [s.name for s in extra],
-                "by_activation_shares": scores,
+                "by_activation_weight": scores,
             },
         )
         print(json.dumps(scores, indent=1))
         print(f"wrote {args.cv_out}")
         return
-    rows, labels = _inputs([*songs, *extra], audio)
-    names = [s.name for s in [*songs, *extra]]
+    rows, labels = _inputs(songs, audio)
+    names = [s.name for s in songs]
     fit([rows[n] for n in names], [labels[n] for n in names], names).save(args.out)
-    print(f"wrote {args.out} (fitted on {len(songs)} tuning and {len(extra)} fitting songs)")
+    print(f"wrote {args.out} (fitted on {len(songs)} tuning songs)")
 
 
 if __name__ == "__main__":

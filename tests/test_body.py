@@ -277,7 +277,7 @@ def test_demo_song_whole_body_covers_the_energetic_beats(demo_song):
     assert whole >= 0.7 and whole > paws_only
     check_limits(dance.body_targets, dance.fps)
     body_range = np.ptp(dance.body_targets, axis=0)
-    assert body_range[0] >= 0.02 and np.any(body_range[1:] > 0)  # the trunk moves and turns
+    assert body_range[0] >= 0.02 and np.sum(body_range[1:] > 0) >= 2  # the trunk moves
     # Which turns a dance uses is the seed's draw: over three seeds, every angle moves.
     ranges = [body_range] + [
         np.ptp(make_dance(path, None, DanceSpec(seed=s))[0].body_targets, axis=0) for s in (1, 2)

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks.real_music import FIT_ROOT, REAL_SET_ROOTS, read_sources
+from benchmarks.real_music import REAL_SET_ROOTS, read_sources
 from benchmarks.train_beat_activation import FPS, SR_HZ, fit, frame_labels
 from quaddance.errors import InputFileError
 from quaddance.music import analysis, beat_activation
@@ -29,11 +29,9 @@ def _peak_near(x: np.ndarray, frames: np.ndarray, radius: int) -> np.ndarray:
 
 def test_the_shipped_model_was_fitted_on_tuning_songs_only() -> None:
     model = load_model()
-    roots = [*REAL_SET_ROOTS.values(), FIT_ROOT]
-    splits = {s.name: s.split for root in roots for s in read_sources(root)[0]}
+    splits = {s.name: s.split for root in REAL_SET_ROOTS.values() for s in read_sources(root)[0]}
     tuning = {name for name, split in splits.items() if split == "tuning"}
-    # Every tuning song of the sets and every fitting song, and no held-out one.
-    assert set(model.trained_on) == tuning
+    assert set(model.trained_on) == tuning  # every tuning song, and no held-out one
     assert model.context == beat_activation.CONTEXT
     assert model.weights.shape == (n_features(model.context),)
 
@@ -114,8 +112,7 @@ def test_the_fit_and_cross_validation_commands_write_their_files(tmp_path, monke
     from benchmarks.real_music import RealSong
 
     songs, audio = [], {}
-    specs = ((100.0, "A"), (128.0, "B"), (116.0, "B (band)"), (108.0, "C"))
-    for k, (tempo, artist) in enumerate(specs):
+    for k, (tempo, artist) in enumerate(((100.0, "A"), (128.0, "B"), (116.0, "B (band)"))):
         y, truth = render_song(tempo, 12.0, seed=k)
         name = f"song{k}"
         audio[name] = y
@@ -123,26 +120,14 @@ def test_the_fit_and_cross_validation_commands_write_their_files(tmp_path, monke
             RealSong(name, name, artist, "tuning", "recording", tmp_path / f"{name}.ogg",
                      truth.beats_s, truth.downbeats_s, (tempo, tempo), "4/4", "MIT", 12.0)
         )  # fmt: skip
-    # The last one stands for the fitting songs: fitted on, never scored.
-    monkeypatch.setattr(tba, "tuning_songs", lambda: songs[:3])
-    monkeypatch.setattr(tba, "fitting_songs", lambda: songs[3:])
+    monkeypatch.setattr(tba, "tuning_songs", lambda: songs)
     monkeypatch.setattr(tba, "load_audio_at", lambda song, sr: audio[song.name])
     model_path, cv_path = tmp_path / "model.json", tmp_path / "cv.json"
     tba.main(["--out", str(model_path)])
-    assert BeatActivationModel.load(model_path).trained_on == ("song0", "song1", "song2", "song3")
+    assert BeatActivationModel.load(model_path).trained_on == ("song0", "song1", "song2")
     tba.main(["--cross-validate", "--weights", "0", "0.5", "--cv-out", str(cv_path)])
     cv = json.loads(cv_path.read_text())
-    assert cv["songs"] == ["song0", "song1", "song2"] and cv["fitting_songs"] == ["song3"]
-    alone_path = tmp_path / "cv_alone.json"
-    tba.main(["--cross-validate", "--weights", "0.5", "0.7", "--tempo-weights", "0.3",
-              "--cv-out", str(alone_path), "--without-fitting-songs"])  # fmt: skip
-    alone = json.loads(alone_path.read_text())
-    assert alone["fitting_songs"] == [] and alone["command"].endswith("--without-fitting-songs")
-    # Each beat share with each tempo share: the two shares are set apart.
-    assert set(alone["by_activation_shares"]) == {"tempo 0.3, beat 0.5", "tempo 0.3, beat 0.7"}
-    assert "--tempo-weights 0.3" in alone["command"]
-    tba.main(["--out", str(model_path), "--without-fitting-songs"])
-    assert BeatActivationModel.load(model_path).trained_on == ("song0", "song1", "song2")
-    assert set(cv["by_activation_shares"]) == {"tempo 0, beat 0", "tempo 0.5, beat 0.5"}
-    for scores in cv["by_activation_shares"].values():
+    assert cv["songs"] == ["song0", "song1", "song2"]
+    assert set(cv["by_activation_weight"]) == {"0", "0.5"}
+    for scores in cv["by_activation_weight"].values():
         assert 0.5 < scores["f_metrical"] <= 1.0 and 0.0 <= scores["f"] <= 1.0

@@ -7,9 +7,8 @@ Ellis 2007) with the changes that matter for dance music:
    intro counts as much as a loud chorus: one for tempo (dB flux, full band + kick/bass band)
    and one for placing beats (dB flux + treble flux with gentler compression, where snare, hats
    and cymbals make drum hits stand out from off-beat bass notes and chord stabs). Half of
-   the first and 70 % of the second is a learned beat activation (`music.beat_activation`,
-   fitted on real music with exact beats), which tells the bands that carry the beat from
-   those that carry off-beats.
+   each is a learned beat activation (`music.beat_activation`, fitted on real music with exact
+   beats), which tells the bands that carry the beat from those that carry off-beats.
 2. The tempo is the lag whose first four multiples carry the most autocorrelation (which rules
    out the "2/3 tempo" error), times a broad log-normal prior centred on the usual dance
    tempi (80-160 BPM), which settles the half/double-tempo choice where the music leaves it
@@ -115,13 +114,10 @@ class AnalysisConfig:
     """Shortest section, bars."""
     section_threshold: float = 1.0
     """Novelty a boundary needs; one unit = 3 dB louder or 50 % more onsets (tuned)."""
-    activation_tempo_weight: float = 0.5
-    """Share of the learned beat activation (`music.beat_activation`) in the tempo envelope;
-    0 leaves it as measured."""
-    activation_beat_weight: float = 0.7
-    """Its share in the beat-placement envelope. Both chosen by leaving one artist out of the
-    tuning songs of the real-music sets at a time (``python -m benchmarks.train_beat_activation
-    --cross-validate``)."""
+    activation_weight: float = 0.5
+    """Share of the learned beat activation (`music.beat_activation`) in both onset envelopes;
+    0 leaves them as measured. Chosen by leaving one artist out of the tuning songs of the
+    real-music sets at a time (``python -m benchmarks.train_beat_activation --cross-validate``)."""
     activation_model: Path | None = None
     """The activation's weights file; None: the shipped ``data/beat_activation.json``."""
 
@@ -300,12 +296,12 @@ def _features(y: np.ndarray, sr: int, cfg: AnalysisConfig) -> _Features:
     )
     bands = beat_activation.band_flux(flux_db, flux_log)
     band_rows = np.log1p(np.stack([_local_normalise(row, fps, cfg) for row in bands]))
-    if cfg.activation_tempo_weight > 0.0 or cfg.activation_beat_weight > 0.0:
+    if cfg.activation_weight > 0.0:
         model = beat_activation.load_model(cfg.activation_model)
         act = unit_mean(_local_normalise(model.activation(band_rows), fps, cfg))
-        w_tempo, w_beat = cfg.activation_tempo_weight, cfg.activation_beat_weight
-        tempo_onset = (1.0 - w_tempo) * unit_mean(tempo_onset) + w_tempo * act
-        beat_onset = (1.0 - w_beat) * unit_mean(beat_onset) + w_beat * act
+        w = cfg.activation_weight
+        tempo_onset = (1.0 - w) * unit_mean(tempo_onset) + w * act
+        beat_onset = (1.0 - w) * unit_mean(beat_onset) + w * act
     rms = rms_from_stft(stft, cfg.n_fft)
     chroma = normalize_peak(banks.chroma @ power, axis=0)
     bass = (banks.freqs_hz >= 30.0) & (banks.freqs_hz <= cfg.bass_chroma_max_hz)
@@ -319,11 +315,7 @@ def _features(y: np.ndarray, sr: int, cfg: AnalysisConfig) -> _Features:
 def activation_rows(y: np.ndarray, sr: int, cfg: AnalysisConfig | None = None) -> np.ndarray:
     """(16, n) the learned beat activation's input rows for mono audio ``y``, one column per
     onset frame (what ``python -m benchmarks.train_beat_activation`` fits on)."""
-    cfg = (
-        AnalysisConfig(activation_tempo_weight=0.0, activation_beat_weight=0.0)
-        if cfg is None
-        else cfg
-    )
+    cfg = AnalysisConfig(activation_weight=0.0) if cfg is None else cfg
     return _features(np.asarray(y, dtype=np.float32), sr, cfg).band_rows
 
 

@@ -3,10 +3,9 @@
 A logistic regression over the flux of 8 mel bands (dB and log1p-compressed, each divided by
 its local level) at a frame and the 3 frames on either side. It learns which bands carry the
 beat (a kick, a snare) and which carry the off-beats (open hats, skanks) from real music with
-exact beats: the tuning songs of the real-music sets and the fitting songs
-(``benchmarks/real_music*``, their sources and licences in each set's ``sources.toml``). The
-analyser mixes it into its onset envelopes (`analysis.AnalysisConfig.activation_tempo_weight`,
-`activation_beat_weight`).
+exact beats: the tuning songs of the real-music sets (``benchmarks/real_music*``, their
+sources and licences in each set's ``sources.toml``). The analyser mixes it into its onset
+envelopes (`analysis.AnalysisConfig.activation_weight`).
 
 ``python -m benchmarks.train_beat_activation`` fits it and writes ``data/beat_activation.json``;
 this module only reads and applies it, in numpy. The weights are this project's own, fitted at
