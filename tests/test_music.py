@@ -353,3 +353,34 @@ def test_bench_midi_render_that_never_ends_fails_clearly(
     with pytest.raises(QuaddanceError, match=r"a\.mid .*did not finish|did not finish .*a\.mid"):
         render_midi(tmp_path / "a.mid", tmp_path / "a.wav", tmp_path / "gm.sf2")
     assert not (tmp_path / "a.wav").exists()
+
+
+def test_dance_level_halves_fast_beats_and_doubles_slow_ones() -> None:
+    from quaddance.layout import DANCE_TEMPO_BPM
+    from quaddance.music.analysis import dance_level
+
+    fast = np.arange(40) * 60.0 / 200.0  # 200 BPM
+    strength = np.tile([1.0, 3.0], 20)  # the odd beats are the stronger
+    np.testing.assert_allclose(dance_level(fast, strength), fast[1::2])  # 100 BPM
+    slow = np.arange(10) * 60.0 / 50.0  # 50 BPM
+    doubled = dance_level(slow, np.ones(10))
+    np.testing.assert_allclose(np.diff(doubled), 0.6)  # 100 BPM
+    inside = np.arange(20) * 60.0 / 175.0
+    assert dance_level(inside, np.ones(20)) is inside
+    for beats_s in (fast, slow, inside):
+        bpm = 60.0 / np.median(np.diff(dance_level(beats_s, np.ones(len(beats_s)))))
+        assert DANCE_TEMPO_BPM[0] <= bpm <= DANCE_TEMPO_BPM[1]
+
+
+@pytest.mark.parametrize(("click_bpm", "level_bpm"), [(200.0, 100.0), (55.0, 110.0)])
+def test_the_analyser_reports_a_level_inside_the_dance_range(click_bpm, level_bpm) -> None:
+    # Click tracks outside the dance range: at 55 BPM the tempo search finds 55 (the search
+    # reaches 50), and the beats are doubled into the range; at 200 it already prefers 100.
+    y = np.zeros(int(20.0 * SR), dtype=np.float32)
+    click = np.sin(2 * np.pi * 1000.0 * np.arange(220) / SR) * np.hanning(220)
+    for t_s in np.arange(0.5, 19.5, 60.0 / click_bpm):
+        i = int(t_s * SR)
+        y[i : i + 220] += click.astype(np.float32)
+    result = analyze(y, SR)
+    assert result.tempo_bpm == pytest.approx(level_bpm, rel=0.02)
+    assert np.all(np.diff(result.beats_s) >= 0.2)

@@ -12,17 +12,17 @@ Ellis 2007) with the changes that matter for dance music:
 2. The tempo is the lag whose first four multiples carry the most autocorrelation (which rules
    out the "2/3 tempo" error), times a broad log-normal prior centred on the usual dance
    tempi (80-160 BPM), which settles the half/double-tempo choice where the music leaves it
-   open: octave errors dominate beat-tracking errors (FACTS.md §4). Only tempi in the dance
-   range (`DANCE_TEMPO_BPM`, 60-180 BPM) are considered.
+   open: octave errors dominate beat-tracking errors (FACTS.md §4).
 3. The tempo may change: a local tempo curve (Viterbi over windowed autocorrelation near the
-   global tempo and inside the dance range, with drift and jumps) guides the dynamic
-   program.
+   global tempo, with drift and jumps) guides the dynamic program.
 4. Swing: beats that landed on swung off-beats are moved back onto the beat.
    Off-beats: beats move by half a beat when the bass line changes pitch at their midpoints
    rather than at them (off-beat hats, skanking keys pull the tracker; harmony does not move).
    Backbeat: the tempo doubles when the midpoints hold hits as strong as the beats and clearly
    stronger than the quarter-beat positions (a rock snare on 2 and 4 heard at half tempo: the
    150 BPM song reported at 75), as long as the doubled tempo stays in the dance range.
+   Last, beats faster than the dance range (`DANCE_TEMPO_BPM`, 60-180 BPM) are halved and
+   slower ones doubled, so that the beat level reported is one a robot dances.
 5. Downbeats: the 4/4 bar phase with the most bass onsets and chord changes on beat 1.
 6. Sections: checkerboard novelty on bar-synchronous loudness, onset density and harmony.
 
@@ -74,10 +74,11 @@ class AnalysisConfig:
     """Gain inside log1p(gain * mel / max) of the treble onset: about 50 dB of range."""
     local_norm_s: float = 3.0
     """Window of the local level that the onset envelope is divided by, seconds."""
-    min_bpm: float = DANCE_TEMPO_BPM[0]
-    """Slowest tempo considered, BPM, of the global tempo and of the local tempo path."""
-    max_bpm: float = DANCE_TEMPO_BPM[1]
-    """Fastest tempo considered, BPM, of the global tempo and of the local tempo path."""
+    min_bpm: float = 50.0
+    """Slowest tempo searched, BPM: the dance range with a margin, so that a clear pulse just
+    outside it is found (its beats are then folded into the range)."""
+    max_bpm: float = 220.0
+    """Fastest tempo searched, BPM."""
     prior_center_bpm: float = 120.0
     """Centre of the tempo prior: the middle of the usual dance tempi 80-160 BPM (FACTS.md §4)."""
     prior_sigma_octaves: float = 1.2
@@ -384,11 +385,8 @@ def _local_period(
     win = round(cfg.tempo_window_s * fps)
     if n < 2 * win:
         return np.full(n, period)
-    # Candidate periods on a log grid of 1 % steps around the global period, inside the
-    # tempo range (so that the beats' level stays in it).
+    # Candidate periods on a log grid of 1 % steps around the global period.
     log_ratio = np.arange(-np.log(cfg.max_tempo_ratio), np.log(cfg.max_tempo_ratio), 0.01)
-    bpm = tempo_bpm * np.exp(-log_ratio)
-    log_ratio = log_ratio[(bpm >= cfg.min_bpm) & (bpm <= cfg.max_bpm)]
     periods = period * np.exp(log_ratio)
     hop = max(1, round(fps / 4))
     centers = np.arange(win // 2, n - win + win // 2 + 1, hop)
@@ -605,6 +603,23 @@ def _refine(beats: np.ndarray, onset: np.ndarray, radius: int = 1) -> np.ndarray
     return out
 
 
+def dance_level(beats_s: np.ndarray, strength: np.ndarray) -> np.ndarray:
+    """``beats_s`` (increasing, seconds) at a level inside `DANCE_TEMPO_BPM`: every other beat
+    (the phase whose beats are stronger, ``strength`` at each beat) while their median tempo is
+    above it, the midpoints added while below. One step always lands inside: the range spans
+    more than an octave."""
+    lo_bpm, hi_bpm = DANCE_TEMPO_BPM
+    if len(beats_s) < 4:
+        return beats_s
+    bpm = 60.0 / float(np.median(np.diff(beats_s)))
+    if bpm > hi_bpm:
+        phase = int(np.argmax([strength[0::2].mean(), strength[1::2].mean()]))
+        return beats_s[phase::2]
+    if bpm < lo_bpm:
+        return np.sort(np.concatenate([beats_s, 0.5 * (beats_s[1:] + beats_s[:-1])]))
+    return beats_s
+
+
 def _spaced(times_s: np.ndarray) -> np.ndarray:
     """(n,) mask of the ``times_s`` kept so that each comes at least `MIN_BEAT_GAP_S` after the
     last one kept (the first is kept): strictly increasing, whatever their order."""
@@ -741,6 +756,10 @@ def analyze(y: np.ndarray, sr: int, cfg: AnalysisConfig | None = None) -> Analys
     beats_s = _refine(beat_frames, feats.beat_onset) / fps
     keep = _spaced(beats_s)
     beat_frames, beats_s = beat_frames[keep], beats_s[keep]
+    strength = np.interp(beats_s * fps, np.arange(len(feats.beat_onset)), feats.beat_onset)
+    folded = dance_level(beats_s, strength)
+    if len(folded) != len(beats_s):  # halved or doubled into the dance range
+        beats_s, beat_frames = folded, np.round(folded * fps).astype(int)
     phase = _downbeat_phase(beat_frames, feats)
     downbeat_frames = beat_frames[phase::BEATS_PER_BAR]
     section_frames = _sections(downbeat_frames, feats, cfg)
