@@ -605,9 +605,10 @@ def _refine(beats: np.ndarray, onset: np.ndarray, radius: int = 1) -> np.ndarray
 
 def dance_level(beats_s: np.ndarray, strength: np.ndarray) -> np.ndarray:
     """``beats_s`` (increasing, seconds) at a level inside `DANCE_TEMPO_BPM`: every other beat
-    (the phase whose beats are stronger, ``strength`` at each beat) while their median tempo is
-    above it, the midpoints added while below. One step always lands inside: the range spans
-    more than an octave."""
+    (the phase whose beats are stronger, ``strength`` at each beat) when their median tempo is
+    above it, the midpoints added when below. The range spans more than an octave, so one step
+    lands inside for any tempo the analyser tracks (its search, 50-220 BPM, give or take the
+    local tempo's 30 %)."""
     lo_bpm, hi_bpm = DANCE_TEMPO_BPM
     if len(beats_s) < 4:
         return beats_s

@@ -11,8 +11,8 @@ bass chroma of item 5):
 2. Tempo, every 0.25 s: the harmonic autocorrelation salience of the last ``TEMPO_WINDOW_S`` of
    the tempo envelope (the same "lag whose multiples line up" score and log-normal prior as the
    offline analyser, which prefers the true tempo to half tempo in the dance range), followed
-   by an online Viterbi filter over a log-tempo grid spanning the dance range (the
-   analyser's `DANCE_TEMPO_BPM`, 60-180 BPM): tempo drifts cheaply and jumps at a fixed
+   by an online Viterbi filter over a log-tempo grid spanning the dance range
+   (`layout.DANCE_TEMPO_BPM`, 60-180 BPM): tempo drifts cheaply and jumps at a fixed
    cost; a recent-weighted window lets a tempo change win within a few seconds (a shorter
    one once the beats start missing their onsets), and the beat score is then recomputed on
    the new period so the beats move onto the new grid at once.
@@ -148,7 +148,8 @@ CHORD_BAND_HZ = (200.0, 2000.0)
 """Band where chord changes are looked for (downbeats), Hz."""
 
 MIN_BPM, MAX_BPM = DANCE_TEMPO_BPM
-"""Tempo search range, BPM: the dance range, the offline analyser's."""
+"""Tempo search range, BPM: the dance range, in which the offline analyser reports its beats
+too (it searches wider and folds its beats into it)."""
 PRIOR_CENTER_BPM = 120.0
 PRIOR_SIGMA_OCTAVES = 1.2
 """Log-normal tempo prior: the offline analyser's (centre of the usual dance tempi 80-160 BPM)."""
