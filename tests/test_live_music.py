@@ -877,3 +877,19 @@ def test_bench_live_whole_loop_tuning_songs_are_tuning_songs(monkeypatch) -> Non
     songs = live_dance_songs(("tuning",), SR_HZ)
     assert [s.name for s in songs] == list(LIVE_DANCE_TUNING_SONGS)
     assert live_dance_songs(("random",), SR_HZ) == []  # only live-case sets and tuning
+
+
+@pytest.mark.parametrize("click_bpm", [190.0, 200.0])
+def test_online_tempo_stays_in_the_dance_range(click_bpm: float) -> None:
+    """A pulse faster than the dance range (60-180 BPM) is tracked at half its rate, on the
+    clicks, never above 180 BPM (the old 55-215 BPM grid took them at 190 and 200)."""
+    from quaddance.layout import DANCE_TEMPO_BPM
+
+    y, ref = _click_track([(click_bpm, 20.0)])
+    track = track_samples(y, SR_HZ, song_start=True)
+    tempos = [b.tempo_bpm for b in track.beats]
+    assert tempos and all(DANCE_TEMPO_BPM[0] <= t <= DANCE_TEMPO_BPM[1] for t in tempos)
+    assert np.median(np.diff(track.beats_s)) == pytest.approx(2 * 60.0 / click_bpm, rel=0.03)
+    locked = np.array([b.time_s for b in track.beats if b.locked])
+    assert len(locked) >= 20  # locked from 3.5-4 s on
+    assert np.all(np.min(np.abs(locked[:, None] - ref[None, :]), axis=1) <= 0.07)  # on clicks
