@@ -617,8 +617,14 @@ def dance_level(beats_s: np.ndarray, strength: np.ndarray) -> np.ndarray:
         phase = int(np.argmax([strength[0::2].mean(), strength[1::2].mean()]))
         return beats_s[phase::2]
     if bpm < lo_bpm:
-        return np.sort(np.concatenate([beats_s, 0.5 * (beats_s[1:] + beats_s[:-1])]))
+        return with_midpoints(beats_s)
     return beats_s
+
+
+def with_midpoints(beats: np.ndarray) -> np.ndarray:
+    """(2 n - 1,) increasing ``beats`` and the midpoints between them: the beat at twice the
+    rate (the backbeat test's doubling, and `dance_level`'s)."""
+    return np.sort(np.concatenate([beats, 0.5 * (beats[1:] + beats[:-1])]))
 
 
 def _spaced(times_s: np.ndarray) -> np.ndarray:
@@ -752,8 +758,7 @@ def analyze(y: np.ndarray, sr: int, cfg: AnalysisConfig | None = None) -> Analys
         beat_frames = beat_frames[beat_frames < len(feats.beat_onset)]
     backbeat_double = _backbeat_double(beat_frames, feats, cfg)
     if backbeat_double:
-        midpoints = np.round(0.5 * (beat_frames[1:] + beat_frames[:-1])).astype(int)
-        beat_frames = np.sort(np.concatenate([beat_frames, midpoints]))
+        beat_frames = np.round(with_midpoints(beat_frames)).astype(int)
     beats_s = _refine(beat_frames, feats.beat_onset) / fps
     keep = _spaced(beats_s)
     beat_frames, beats_s = beat_frames[keep], beats_s[keep]
