@@ -1,5 +1,5 @@
 """Beats and downbeats from a beat activation: a bar-pointer hidden Markov model (the decoder
-of the BeatNet tracker that the real-music benchmark compares ours with, `benchmarks.beatnet`).
+of the BeatNet tracker that the real-music benchmark compares ours with, `quaddance.music.beatnet`).
 
 The model is the one the field's DBN trackers decode (Whiteley, Cemgil and Godsill 2006; the
 discretised state space of Krebs, Böck and Widmer, ISMIR 2015, as madmom's

@@ -688,11 +688,11 @@ def _librosa_beats_s(y: np.ndarray, sr: int) -> np.ndarray:
 
 
 def beatnet_beats_s(y: np.ndarray, sr: int) -> tuple[np.ndarray, np.ndarray]:
-    """(beats, downbeats) in seconds by BeatNet's networks (`benchmarks.beatnet`, the mean of
+    """(beats, downbeats) in seconds by BeatNet's networks (`quaddance.music.beatnet`, the mean of
     its three) decoded by the bar-pointer model with madmom's settings (`benchmarks.bar_hmm`):
     the field's learned tracker under a licence that allows any use (CC BY 4.0)."""
     from benchmarks.bar_hmm import decode
-    from benchmarks.beatnet import FPS, beat_activation
+    from quaddance.music.beatnet import FPS, beat_activation
 
     out = decode(beat_activation(y, sr), FPS)
     beats_s = out.beat_frames / FPS

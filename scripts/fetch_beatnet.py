@@ -4,7 +4,7 @@ BeatNet 1.1.3 (https://github.com/mjhydri/BeatNet, weights and code CC BY 4.0) i
 PyPI as a wheel and checked against its SHA-256. Its three ``models/model_N_weights.pt`` (torch
 state dicts, read with ``weights_only=True``) are loaded, unchanged, into one torch module
 that runs the three networks side by side and averages their beat and downbeat
-probabilities, exported as ``benchmarks/beatnet/beatnet_ensemble.onnx`` (the sequence
+probabilities, exported as ``src/quaddance/data/beatnet/beatnet_ensemble.onnx`` (the sequence
 length free, the LSTM state an input and an output so that a stream can be fed in pieces),
 with the licence beside it. BeatNet itself is never installed (it needs madmom and pyaudio).
 
@@ -25,7 +25,7 @@ from pathlib import Path
 VERSION = "1.1.3"
 WHEEL = f"BeatNet-{VERSION}-py3-none-any.whl"
 WHEEL_SHA256 = "1ecfa17bdcbe899975a88bdb6efebd6970d846a4f3b6cfd5c6f320647c641c7e"
-OUT = Path(__file__).resolve().parent.parent / "benchmarks" / "beatnet"
+OUT = Path(__file__).resolve().parent.parent / "src" / "quaddance" / "data" / "beatnet"
 MODELS = (1, 2, 3)
 ATTRIBUTION = f"""\
 beatnet_ensemble.onnx holds the weights of BeatNet's three pre-trained CRNN models

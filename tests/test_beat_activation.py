@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks import beatnet as ba
 from benchmarks.bar_hmm import DecoderConfig, decode, state_space
 from benchmarks.beats import beat_f_measure
+from quaddance.music import beatnet as ba
 
 REFERENCE = Path(__file__).parent / "data" / "beatnet_reference.npz"
 
@@ -55,6 +55,41 @@ def test_frame_by_frame_is_the_whole_sequence_and_causal(reference) -> None:
     changed = feats.copy()
     changed[125:] = 0.0
     np.testing.assert_array_equal(ba.BeatActivation().run(changed)[:125], whole[:125])
+
+
+def _streamed(y: np.ndarray, seed: int) -> np.ndarray:
+    """`BeatActivationStream` fed ``y`` in blocks of random sizes."""
+    rng, stream, parts, i = np.random.default_rng(seed), ba.BeatActivationStream(), [], 0
+    while i < len(y):
+        k = int(rng.integers(1, 3000))
+        parts.append(stream.push(y[i : i + k]))
+        i += k
+    assert stream.samples == len(y) // ba.HOP * ba.HOP
+    return np.concatenate(parts)
+
+
+def test_a_stream_is_the_same_in_any_blocks_and_never_looks_ahead(reference) -> None:
+    y = reference["audio"]
+    act = _streamed(y, seed=0)
+    assert act.shape == (len(y) // ba.HOP, 2)
+    np.testing.assert_allclose(_streamed(y, seed=1), act, atol=1e-5)
+    # Frame j ends at sample (j + 1) * HOP: changing the audio after it changes no frame up to j.
+    cut = 100 * ba.HOP
+    changed = y.copy()
+    changed[cut:] = 0.0
+    np.testing.assert_allclose(_streamed(changed, seed=2)[:100], act[:100], atol=1e-5)
+    assert np.abs(_streamed(changed, seed=2)[100:] - act[100:]).max() > 0.1
+
+
+def test_a_stream_hears_the_beats_as_they_end(reference) -> None:
+    act = _streamed(reference["audio"], seed=0).sum(axis=1)
+    # A frame hears a beat once its window, which ends at the frame's end, holds it: at most
+    # 2 frames (40 ms) after the beat.
+    beats = reference["beats_s"][reference["beats_s"] * ba.FPS < len(act) - 3]
+    lags = np.array([np.argmax(act[round(t * ba.FPS) : round(t * ba.FPS) + 6]) for t in beats])
+    on_beat = np.array([act[round(t * ba.FPS) + lag] for t, lag in zip(beats, lags, strict=True)])
+    assert on_beat.mean() > 5.0 * act.mean() / 2.0
+    assert np.median(lags) <= 2
 
 
 def test_other_sample_rates_are_resampled(reference) -> None:
@@ -165,3 +200,52 @@ def test_the_real_music_bench_scores_the_beatnet_tracker(reference, tmp_path: Pa
     text = report_md(results)
     assert "| BeatNet's CRNNs (CC BY 4.0) + bar-pointer HMM |" in text
     assert "weights CC BY 4.0, converted by `scripts/fetch_beatnet.py`" in text
+
+
+# --- where the trackers use it ----------------------------------------------------------------
+
+
+def test_the_analyser_mixes_beatnet_into_its_envelopes_only_when_asked(
+    reference, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from quaddance.music import analysis
+
+    y = reference["audio"]
+    on = analysis._features(y, ba.SR_HZ, analysis.AnalysisConfig())
+    assert on.beatnet.shape == (len(on.raw_onset), 2)
+    # The activation at the onset frames is BeatNet's own, read at the same times.
+    own = ba.beat_activation(y, ba.SR_HZ)
+    at = np.round(np.arange(len(on.raw_onset)) / on.fps * ba.FPS).astype(int)
+    inside = at < len(own)
+    assert np.corrcoef(on.beatnet[inside, 0], own[at[inside], 0])[0, 1] > 0.95
+
+    def no_network(*args: object) -> None:
+        raise AssertionError("BeatNet ran with beatnet_weight = 0")
+
+    monkeypatch.setattr(ba, "beat_activation", no_network)
+    off = analysis._features(y, ba.SR_HZ, analysis.AnalysisConfig(beatnet_weight=0.0))
+    assert off.beatnet.shape == (len(off.raw_onset), 0)
+    assert not np.allclose(off.beat_onset, on.beat_onset)
+
+
+def test_the_online_front_end_reads_beatnet_causally_in_any_blocks(reference) -> None:
+    from quaddance.music import online_beats
+
+    y = reference["audio"]
+
+    def learned(block: int) -> np.ndarray:
+        feats = online_beats._Features()
+        spectra = [s for i in range(0, len(y), block) for s in feats.push(y[i : i + block])]
+        return np.array([(s.learned, s.learned_down) for s in spectra])
+
+    one = learned(len(y))
+    assert one.shape == (len(y) // online_beats.HOP, 2)
+    np.testing.assert_allclose(learned(100), one, atol=1e-5)
+    np.testing.assert_allclose(learned(4096), one, atol=1e-5)
+    # Onset frame i (ending at sample (i + 1) * 256) holds BeatNet's newest frame that has
+    # ended by then: frame j ends at (j + 1) * 441.
+    stream = ba.BeatActivationStream().push(y)
+    j = (np.arange(len(one)) + 1) * online_beats.HOP // ba.HOP - 1
+    expected = np.where(j[:, None] >= 0, stream[np.maximum(j, 0)], 0.0)
+    np.testing.assert_allclose(one[:, 0], expected.sum(axis=1), atol=1e-5)
+    np.testing.assert_allclose(one[:, 1], expected[:, 1], atol=1e-5)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import subprocess
 from pathlib import Path
@@ -272,8 +273,11 @@ def test_analyze_cli_writes_all_keys(demo_song: tuple[Path, object], tmp_path: P
     out = tmp_path / "out" / "analysis.json"
     result = CliRunner().invoke(app, ["analyze", str(path), "-o", str(out)])
     assert result.exit_code == 0, result.output
-    assert "118" in result.output and "sections" in result.output
+    assert "sections" in result.output
+    printed_bpm = float(re.search(r"tempo ([0-9.]+) BPM", result.output).group(1))
+    assert printed_bpm == pytest.approx(118.0, abs=0.5)  # the demo song's tempo
     data = json.loads(out.read_text())
+    assert data["tempo_bpm"] == pytest.approx(printed_bpm, abs=0.05)
     assert set(data) >= JSON_KEYS
     assert len(data["beats_s"]) == pytest.approx(truth.beats_s.size, abs=1)
     assert len(data["onset_env"]) == len(data["rms_env"]) > 1000

@@ -8,7 +8,10 @@ Ellis 2007) with the changes that matter for dance music:
    and one for placing beats (dB flux + treble flux with gentler compression, where snare, hats
    and cymbals make drum hits stand out from off-beat bass notes and chord stabs). Half of
    each is a learned beat activation (`music.beat_activation`, fitted on real music with exact
-   beats), which tells the bands that carry the beat from those that carry off-beats.
+   beats), which tells the bands that carry the beat from those that carry off-beats; half of
+   the result is BeatNet's beat activation (`music.beatnet`, recurrent networks trained on
+   annotated real music, CC BY 4.0), which hears the beat where the bands alone put it on the
+   off-beats of electronic music.
 2. The tempo is the lag whose first four multiples carry the most autocorrelation (which rules
    out the "2/3 tempo" error), times a broad log-normal prior centred on the usual dance
    tempi (80-160 BPM), which settles the half/double-tempo choice where the music leaves it
@@ -23,7 +26,8 @@ Ellis 2007) with the changes that matter for dance music:
    150 BPM song reported at 75), as long as the doubled tempo stays in the dance range.
    Last, beats faster than the dance range (`DANCE_TEMPO_BPM`, 60-180 BPM) are halved and
    slower ones doubled, so that the beat level reported is one a robot dances.
-5. Downbeats: the 4/4 bar phase with the most bass onsets and chord changes on beat 1.
+5. Downbeats: the 4/4 bar phase with the most bass onsets, chord changes and BeatNet's
+   downbeat probability on beat 1.
 6. Sections: checkerboard novelty on bar-synchronous loudness, onset density and harmony.
 
 Envelopes are sampled at ``env_fps = sr / hop_length`` (43.07 frames/s at 22.05 kHz, hop 512).
@@ -121,6 +125,11 @@ class AnalysisConfig:
     real-music sets at a time (``python -m benchmarks.train_beat_activation --cross-validate``)."""
     activation_model: Path | None = None
     """The activation's weights file; None: the shipped ``data/beat_activation.json``."""
+    beatnet_weight: float = 0.5
+    """Share of BeatNet's beat activation (`music.beatnet`: networks trained on annotated real
+    music, CC BY 4.0) in both onset envelopes, after the learned activation's; 0 leaves it out.
+    Chosen on the tuning songs of the real-music sets (an even share; the online tracker mixes
+    it at the same share)."""
 
 
 @dataclass
@@ -235,6 +244,7 @@ class _Features:
     bass_chroma: np.ndarray  # (12, n) chroma of 30-300 Hz: the bass line's pitch
     band_rows: np.ndarray  # (16, n) the learned activation's input (`beat_activation`)
     fps: float
+    beatnet: np.ndarray  # (n, 2) BeatNet's P(beat), P(downbeat) per frame; (n, 0) if unused
 
 
 def _moving_average(x: np.ndarray, width: int) -> np.ndarray:
@@ -263,6 +273,7 @@ def _features(y: np.ndarray, sr: int, cfg: AnalysisConfig) -> _Features:
 
     banks = filterbanks(sr, cfg.n_fft, cfg.n_mels)
     fps = sr / cfg.hop_length
+    unpadded = y  # BeatNet frames the audio its own way
     # Lead the audio with silence so that a song starting on a hit gets a normal onset; the
     # extra frames are dropped again below.
     lead = -(-cfg.n_fft // cfg.hop_length)
@@ -303,20 +314,40 @@ def _features(y: np.ndarray, sr: int, cfg: AnalysisConfig) -> _Features:
         w = cfg.activation_weight
         tempo_onset = (1.0 - w) * unit_mean(tempo_onset) + w * act
         beat_onset = (1.0 - w) * unit_mean(beat_onset) + w * act
+    learned = np.zeros((len(raw), 0))
+    if cfg.beatnet_weight > 0.0:
+        learned = _beatnet_frames(unpadded, sr, len(raw), fps)
+        act = unit_mean(learned.sum(axis=1))
+        w = cfg.beatnet_weight
+        tempo_onset = (1.0 - w) * unit_mean(tempo_onset) + w * act
+        beat_onset = (1.0 - w) * unit_mean(beat_onset) + w * act
     rms = rms_from_stft(stft, cfg.n_fft)
     chroma = normalize_peak(banks.chroma @ power, axis=0)
     bass = (banks.freqs_hz >= 30.0) & (banks.freqs_hz <= cfg.bass_chroma_max_hz)
     bass_chroma = banks.chroma[:, bass] @ power[bass]
     hit = flux_log.mean(axis=0)
     return _Features(
-        tempo_onset, beat_onset, low_onset, raw, rms, hit, chroma, bass_chroma, band_rows, fps
-    )
+        tempo_onset, beat_onset, low_onset, raw, rms, hit, chroma, bass_chroma, band_rows, fps,
+        learned,
+    )  # fmt: skip
+
+
+def _beatnet_frames(y: np.ndarray, sr: int, n_frames: int, fps: float) -> np.ndarray:
+    """(n_frames, 2) BeatNet's P(beat), P(downbeat) at the onset frames (frame i at i / fps s),
+    interpolated from its own 50 frames/s."""
+    from quaddance.music import beatnet
+
+    probs = beatnet.beat_activation(y, sr)
+    if len(probs) == 0:
+        return np.zeros((n_frames, 2))
+    t_s, at_s = np.arange(n_frames) / fps, np.arange(len(probs)) / beatnet.FPS
+    return np.stack([np.interp(t_s, at_s, probs[:, k]) for k in range(2)], axis=1)
 
 
 def activation_rows(y: np.ndarray, sr: int, cfg: AnalysisConfig | None = None) -> np.ndarray:
     """(16, n) the learned beat activation's input rows for mono audio ``y``, one column per
     onset frame (what ``python -m benchmarks.train_beat_activation`` fits on)."""
-    cfg = AnalysisConfig(activation_weight=0.0) if cfg is None else cfg
+    cfg = AnalysisConfig(activation_weight=0.0, beatnet_weight=0.0) if cfg is None else cfg
     return _features(np.asarray(y, dtype=np.float32), sr, cfg).band_rows
 
 
@@ -639,7 +670,8 @@ def _spaced(times_s: np.ndarray) -> np.ndarray:
 
 
 def _downbeat_phase(beat_frames: np.ndarray, feats: _Features) -> int:
-    """Index (0-3) of the first downbeat: the bar phase with most bass onsets and chord changes."""
+    """Index (0-3) of the first downbeat: the bar phase with most bass onsets and chord changes
+    (and, where the analyser runs it, BeatNet's downbeat probability)."""
     if len(beat_frames) < 2 * BEATS_PER_BAR:
         return 0
     idx = np.clip(beat_frames, 0, len(feats.low_onset) - 1)
@@ -656,6 +688,9 @@ def _downbeat_phase(beat_frames: np.ndarray, feats: _Features) -> int:
     change[1:] = 1.0 - np.sum(chroma[:, 1:] * chroma[:, :-1], axis=0)
     change = change / (change.mean() + 1e-9)
     evidence = low + change
+    if feats.beatnet.shape[1] == 2:  # BeatNet's downbeat probability, as one more vote
+        down = feats.beatnet[idx, 1]
+        evidence = evidence + down / (down.mean() + 1e-9)
     scores = [evidence[p::BEATS_PER_BAR].mean() for p in range(BEATS_PER_BAR)]
     return int(np.argmax(scores))
 

@@ -5,9 +5,10 @@ The tracker sees the audio block by block and never looks ahead. Per 11.6 ms fra
 bass chroma of item 5):
 
 1. Onset envelopes, as in the offline analyser (``music/analysis.py``) but with causal
-   normalisation (running means instead of centred ones) and without its learned activation:
-   mel dB flux plus kick/bass-band flux for the tempo, mel dB flux plus treble flux for placing
-   beats.
+   normalisation (running means instead of centred ones) and without its own learned
+   activation: mel dB flux plus kick/bass-band flux for the tempo, mel dB flux plus treble flux
+   for placing beats, each half BeatNet's causal beat activation (`music.beatnet`, its 20 ms
+   frames run as they end: `beatnet.BeatActivationStream`), as the analyser mixes it.
 2. Tempo, every 0.25 s: the harmonic autocorrelation salience of the last ``TEMPO_WINDOW_S`` of
    the tempo envelope (the same "lag whose multiples line up" score and log-normal prior as the
    offline analyser, which prefers the true tempo to half tempo in the dance range), followed
@@ -64,8 +65,8 @@ bass chroma of item 5):
    the bass line changes pitch at its midpoints rather than at its beats, twice in a row, the
    grid moves half a beat. At the lock both tests also run on the heard grid (there, once is
    enough), so that a lock reached on the off-beats is moved before its beats are danced to.
-6. Downbeats (4/4): the bar position whose beats carry the most kick/bass-band onsets over
-   the last bars, with hysteresis.
+6. Downbeats (4/4): the bar position whose beats carry the most kick/bass-band onsets, chord
+   changes and BeatNet's downbeat probability over the last bars, with hysteresis.
 7. Energy: RMS mapped to [0, 1] by the 5th and 95th percentiles of the last 30 s (the offline
    choreographer's ``normalized_energy``, causally), smoothed over about 1 s.
 8. Two listeners. The running means of item 1 must start somewhere. Started at the first
@@ -89,12 +90,14 @@ bass chroma of item 5):
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
 
 from quaddance.layout import BEATS_PER_BAR, DANCE_TEMPO_BPM
+from quaddance.music import beatnet
 from quaddance.music.analysis import (
     MIN_BEAT_GAP_S,
     SWING_FRACTIONS,
@@ -442,6 +445,8 @@ class _Spectrum(NamedTuple):
     silent_frames: int  # silent frames in a row, this one included (0: not silent; silent is
     # quieter than SILENCE_DB below the loudness peak, or than SILENCE_ABS_RMS)
     restart: bool  # the first sound after SILENCE_RESET_S of silence: heard as a stream start
+    learned: float  # BeatNet's P(beat) + P(downbeat), its newest frame that ends by this one's end
+    learned_down: float  # ... its P(downbeat)
 
 
 class _Frame(NamedTuple):
@@ -454,6 +459,7 @@ class _Frame(NamedTuple):
     rms: float
     mel_db: np.ndarray  # (N_MELS,)
     bass_chroma: np.ndarray  # (12,) power of the bass band per pitch class
+    learned_down: float  # BeatNet's P(downbeat)
 
 
 REF_DECAY = 10 ** (-0.6 * FRAME_S / 10.0)
@@ -491,6 +497,9 @@ class _Features:
         self.peak_rms = 0.0
         self.silent_frames = 0  # silent frames in a row
         self.silences = 0  # silences of SILENCE_RESET_S so far (the listeners reset at each)
+        self.learned = beatnet.BeatActivationStream()
+        self.learned_now = np.zeros(2)  # its newest P(beat), P(downbeat)
+        self.learned_fed = 0  # samples given to that stream so far
 
     def push(self, samples: np.ndarray) -> list[_Spectrum]:
         """Add samples; return the features of each new frame."""
@@ -499,7 +508,8 @@ class _Features:
         if n_frames == 0:
             return []
         used = n_frames * HOP
-        audio = np.concatenate([self.tail, self.pending[:used]])
+        new = self.pending[:used]
+        audio = np.concatenate([self.tail, new])
         self.pending = self.pending[used:]
         self.tail = audio[-(BASS_N_FFT - HOP) :]
         idx = np.arange(n_frames)[:, None] * HOP + np.arange(BASS_N_FFT)[None, :]
@@ -510,15 +520,55 @@ class _Features:
         mel = power @ self.mel_fb_t  # (n_frames, n_mels)
         bass_spec = np.fft.rfft(wide * self.bass_window, axis=1)[:, self.bass_bins]
         bass_chroma = (np.abs(bass_spec) ** 2) @ self.bass_chroma_t  # (n_frames, 12)
-        return [self._spectrum(mel[i], float(rms[i]), bass_chroma[i]) for i in range(n_frames)]
+        silent, restart = zip(*(self._silence(float(r)) for r in rms), strict=True)
+        # BeatNet's stream starts again with the music after a silence, as from a file's start.
+        cuts = [0, *(i for i in range(1, n_frames) if restart[i]), n_frames]
+        learned = np.concatenate(
+            [self._learned(new[a * HOP : b * HOP], restart[a]) for a, b in itertools.pairwise(cuts)]
+        )
+        return [
+            self._spectrum(mel[i], float(rms[i]), bass_chroma[i], learned[i], silent[i], restart[i])
+            for i in range(n_frames)
+        ]
 
-    def _spectrum(self, mel: np.ndarray, rms: float, bass_chroma: np.ndarray) -> _Spectrum:
-        """One frame's fluxes against the previous frame, in dB below a decaying reference."""
+    def _silence(self, rms: float) -> tuple[int, bool]:
+        """(silent frames in a row, this one included; whether this frame restarts the music)."""
         self.peak_rms = max(self.peak_rms * REF_DECAY, rms)
         silent = rms < max(SILENCE_ABS_RMS, self.peak_rms * 10 ** (SILENCE_DB / 20))
         restart = not silent and self.silent_frames >= SILENCE_RESET_FRAMES
         self.silent_frames = self.silent_frames + 1 if silent else 0
         self.silences += self.silent_frames == SILENCE_RESET_FRAMES
+        return self.silent_frames, restart
+
+    def _learned(self, audio: np.ndarray, restart: bool) -> np.ndarray:
+        """(len(audio) // HOP, 2) BeatNet's newest P(beat), P(downbeat) that has ended by each
+        onset frame's end (its frames are 20 ms apart, ours 11.6 ms); a new stream from the
+        first sample if ``restart``."""
+        if restart:
+            self.learned, self.learned_fed, self.learned_now = (
+                beatnet.BeatActivationStream(), 0, np.zeros(2)
+            )  # fmt: skip
+        start = self.learned.samples
+        probs = self.learned.push(audio)
+        learned_end = start + beatnet.HOP * np.arange(1, len(probs) + 1)
+        ends = self.learned_fed + HOP * np.arange(1, len(audio) // HOP + 1)
+        self.learned_fed += len(audio)
+        latest = np.searchsorted(learned_end, ends, side="right") - 1
+        out = np.vstack([self.learned_now[None, :], probs])[latest + 1]
+        if len(probs):
+            self.learned_now = probs[-1]
+        return out
+
+    def _spectrum(
+        self,
+        mel: np.ndarray,
+        rms: float,
+        bass_chroma: np.ndarray,
+        learned: np.ndarray,
+        silent_frames: int,
+        restart: bool,
+    ) -> _Spectrum:
+        """One frame's fluxes against the previous frame, in dB below a decaying reference."""
         if restart:
             # Music after a silence is heard as from the stream's start: no frame before its
             # first one (no flux), and its own loudness reference.
@@ -538,14 +588,17 @@ class _Features:
             rms,
             db,
             bass_chroma,
-            self.silent_frames,
+            silent_frames,
             restart,
+            float(learned.sum()),
+            float(learned[1]),
         )
 
 
 class _Onsets:
-    """The two normalised onset envelopes of one listener, from the shared fluxes (causal
-    normalisation: running means instead of the offline analyser's centred ones).
+    """The two normalised onset envelopes of one listener, from the shared fluxes and BeatNet's
+    activation (causal normalisation: running means instead of the offline analyser's centred
+    ones).
 
     Args:
         even_start: running means of the samples heard so far (`_Ema`'s ``even_start``), for
@@ -569,7 +622,7 @@ class _Onsets:
                 _Ema(3.0 * fps, even_start),
                 _Ema(30.0 * fps, even_start),
             )
-            for k in "tb"
+            for k in "tbl"
         }
 
     def frame(self, spectrum: _Spectrum) -> _Frame:
@@ -578,7 +631,16 @@ class _Onsets:
         tempo = self._normalise("t", full + low)
         beat_raw = full / max(self.mean_full(full), 1e-6) + high / max(self.mean_high(high), 1e-6)
         beat = self._normalise("b", beat_raw)
-        return _Frame(tempo, beat, low, full, spectrum.rms, spectrum.mel_db, spectrum.bass_chroma)
+        # BeatNet's activation, normalised as the flux is: its broad humps between the beats
+        # sink below the floor, its peaks stay.
+        learned = self._normalise("l", spectrum.learned)
+        w = ANALYSER_CFG.beatnet_weight
+        tempo = (1.0 - w) * tempo + w * learned
+        beat = (1.0 - w) * beat + w * learned
+        return _Frame(
+            tempo, beat, low, full, spectrum.rms, spectrum.mel_db, spectrum.bass_chroma,
+            spectrum.learned_down,
+        )  # fmt: skip
 
     def _normalise(self, key: str, x: float) -> float:
         """Remove the slow floor, divide by the local level (3 s); the floor on the divisor
@@ -763,10 +825,15 @@ class _Listener:
         self._flux: list[float] = []  # full-band flux per frame (`_bursty`)
         self._mel: list[np.ndarray] = []  # mel spectrum per frame, dB
         self._bass: list[np.ndarray] = []  # bass chroma per frame
+        self._down: list[float] = []  # BeatNet's P(downbeat) per frame
         self._pending_bar: list[int] = []  # frames of reported beats not yet in the bar count
         self._beats_counted = 0
-        self._mean_low = _Ema(2 * BEATS_PER_BAR)  # per-beat means that scale the two cues
-        self._mean_change = _Ema(2 * BEATS_PER_BAR)
+        # Per-beat means that scale the three cues, evenly started: a first beat that misses
+        # its cue (no kick in reach yet) must not stand for the past, or the next one's cue
+        # counts many times over and holds the bar phase for bars.
+        self._mean_low = _Ema(2 * BEATS_PER_BAR, even_start=True)
+        self._mean_change = _Ema(2 * BEATS_PER_BAR, even_start=True)
+        self._mean_down = _Ema(2 * BEATS_PER_BAR, even_start=True)
         self._cum: list[float] = []
         self._hist_start = self._n_frames  # frame number of the first history entry
         self._viterbi: np.ndarray | None = None
@@ -844,6 +911,7 @@ class _Listener:
         self._flux.append(frame.full_flux)
         self._mel.append(frame.mel_db)
         self._bass.append(frame.bass_chroma)
+        self._down.append(frame.learned_down)
         self._cum.append(cum)
         excess = len(self._cum) - self._hist_len
         if excess > 0:
@@ -854,6 +922,7 @@ class _Listener:
                 self._flux,
                 self._mel,
                 self._bass,
+                self._down,
                 self._cum,
             ):
                 del h[:excess]
@@ -1188,8 +1257,9 @@ class _Listener:
     def _count_bar(self) -> None:
         """Downbeat evidence for beats heard up to one period after them: the kick/bass onset
         at the beat plus the change of the spectrum (chords change on beat 1) from the beat
-        before to the beat after, each divided by its recent mean (the offline analyser's
-        bass onsets + chord changes; the mel spectrum stands in for chroma)."""
+        before to the beat after, and BeatNet's downbeat probability, each divided by its recent
+        mean (the offline analyser's bass onsets + chord changes + BeatNet's vote; the mel
+        spectrum stands in for chroma)."""
         period = max(1, round(self._period))
         newest = self._hist_start + len(self._mel)  # frame number of the newest frame
         while self._pending_bar and self._pending_bar[0] + period <= newest:
@@ -1207,6 +1277,8 @@ class _Listener:
             change = float(np.mean(np.abs(after - before)))  # dB
             evidence = low / max(self._mean_low(low), 1e-9)
             evidence += change / max(self._mean_change(change), 1e-9)
+            down = max(self._down[max(0, beat - 3) : beat + 4])
+            evidence += down / max(self._mean_down(down), 1e-9)
             self._add_bar_evidence(evidence, index)
 
     def _add_bar_evidence(self, evidence: float, index: int) -> None:

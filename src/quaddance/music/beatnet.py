@@ -1,11 +1,13 @@
-"""A learned beat and downbeat activation, BeatNet's causal CRNNs: a tracker the real-music
-benchmark compares ours with (`bar_hmm` decodes it).
+"""A learned beat and downbeat activation, BeatNet's causal CRNNs: half of both beat trackers'
+onset envelopes (`analysis.AnalysisConfig.beatnet_weight`; `BeatActivationStream` for the
+online one), and what the real-music benchmark's BeatNet tracker decodes
+(``benchmarks/bar_hmm.py``).
 
 BeatNet (Heydari, Cwitkowitz and Duan, "BeatNet: CRNN and particle filtering for online joint
 beat downbeat and meter tracking", ISMIR 2021; https://github.com/mjhydri/BeatNet) is a small
 network (about 400 k weights) trained on annotated real music (Ballroom, Beatles, Rock Corpus,
 GTZAN...). Its weights are published under CC BY 4.0, which allows any use with attribution:
-``benchmarks/beatnet/`` holds its three models (each trained with one data set left out), converted
+``data/beatnet/`` holds its three models (each trained with one data set left out), converted
 from the PyPI wheel ``BeatNet==1.1.3`` into one ONNX graph that averages them (run by
 onnxruntime) by ``scripts/fetch_beatnet.py``, with the licence beside it.
 
@@ -19,6 +21,7 @@ triangular filterbank from 30 Hz to 17 kHz, log10(1 + x) and its positive first 
 from __future__ import annotations
 
 import functools
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +36,7 @@ FPS = SR_HZ / HOP
 """Activation frames per second (50)."""
 BANDS_PER_OCTAVE = 24
 FMIN_HZ, FMAX_HZ, FREF_HZ = 30.0, 17000.0, 440.0
-WEIGHTS_DIR = Path(__file__).resolve().parent / "beatnet"
+WEIGHTS_DIR = Path(str(resources.files("quaddance") / "data" / "beatnet"))
 """Where the converted weights and their licence are (``scripts/fetch_beatnet.py``)."""
 MODEL = "beatnet_ensemble.onnx"
 """BeatNet's three networks (trained with GTZAN, Ballroom and the Rock Corpus left out in turn)
@@ -159,3 +162,30 @@ def beat_activation(y: np.ndarray, sr: int) -> np.ndarray:
 
         y = soxr.resample(np.asarray(y, dtype=np.float32), sr, SR_HZ, quality="HQ")
     return BeatActivation().run(features(y))
+
+
+class BeatActivationStream:
+    """`BeatActivation` over audio that arrives in blocks (the online tracker's): frame j spans
+    the FRAME samples that end at sample (j + 1) * HOP (zeros before the stream's start), so
+    it is computed as soon as its last sample arrives, never looking ahead."""
+
+    def __init__(self) -> None:
+        self._net = BeatActivation()
+        self._audio = np.zeros(FRAME - HOP, np.float32)  # the window's past, then new samples
+        self._prev_spec = np.zeros((1, _front_end()[1].shape[1]), np.float32)  # silence before
+        self.samples = 0  # samples of the stream that ended a frame so far
+
+    def push(self, samples: np.ndarray) -> np.ndarray:
+        """Add mono samples at SR_HZ; return (m, 2) P(beat), P(downbeat) of the m frames they
+        complete, frame k ending at sample ``samples_before + (k + 1) * HOP``."""
+        self._audio = np.concatenate([self._audio, np.asarray(samples, np.float32)])
+        m = (len(self._audio) - (FRAME - HOP)) // HOP
+        if m == 0:
+            return np.zeros((0, 2), np.float32)
+        frames = np.lib.stride_tricks.sliding_window_view(self._audio, FRAME)[::HOP][:m]
+        spec = log_spectrum(frames)
+        diff = np.maximum(np.diff(spec, axis=0, prepend=self._prev_spec), 0.0)
+        self._prev_spec = spec[-1:]
+        self._audio = self._audio[m * HOP :]
+        self.samples += m * HOP
+        return self._net.run(np.hstack([spec, diff]))
