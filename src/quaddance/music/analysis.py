@@ -40,7 +40,7 @@ import json
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -311,16 +311,14 @@ def _features(y: np.ndarray, sr: int, cfg: AnalysisConfig) -> _Features:
     if cfg.activation_weight > 0.0:
         model = beat_activation.load_model(cfg.activation_model)
         act = unit_mean(_local_normalise(model.activation(band_rows), fps, cfg))
-        w = cfg.activation_weight
-        tempo_onset = (1.0 - w) * unit_mean(tempo_onset) + w * act
-        beat_onset = (1.0 - w) * unit_mean(beat_onset) + w * act
+        tempo_onset = blend(unit_mean(tempo_onset), act, cfg.activation_weight)
+        beat_onset = blend(unit_mean(beat_onset), act, cfg.activation_weight)
     learned = np.zeros((len(raw), 0))
     if cfg.beatnet_weight > 0.0:
         learned = _beatnet_frames(unpadded, sr, len(raw), fps)
         act = unit_mean(learned.sum(axis=1))
-        w = cfg.beatnet_weight
-        tempo_onset = (1.0 - w) * unit_mean(tempo_onset) + w * act
-        beat_onset = (1.0 - w) * unit_mean(beat_onset) + w * act
+        tempo_onset = blend(unit_mean(tempo_onset), act, cfg.beatnet_weight)
+        beat_onset = blend(unit_mean(beat_onset), act, cfg.beatnet_weight)
     rms = rms_from_stft(stft, cfg.n_fft)
     chroma = normalize_peak(banks.chroma @ power, axis=0)
     bass = (banks.freqs_hz >= 30.0) & (banks.freqs_hz <= cfg.bass_chroma_max_hz)
@@ -330,6 +328,15 @@ def _features(y: np.ndarray, sr: int, cfg: AnalysisConfig) -> _Features:
         tempo_onset, beat_onset, low_onset, raw, rms, hit, chroma, bass_chroma, band_rows, fps,
         learned,
     )  # fmt: skip
+
+
+Envelope = TypeVar("Envelope", float, np.ndarray)
+
+
+def blend(envelope: Envelope, activation: Envelope, share: float) -> Envelope:
+    """``envelope`` with ``share`` of it replaced by ``activation`` (both on one scale): how
+    both trackers mix a learned activation into an onset envelope."""
+    return (1.0 - share) * envelope + share * activation
 
 
 def _beatnet_frames(y: np.ndarray, sr: int, n_frames: int, fps: float) -> np.ndarray:

@@ -108,9 +108,13 @@ def features(y: np.ndarray) -> np.ndarray:
     """(n, 2 * n_bands) the network's input for mono audio at SR_HZ: the log spectrum and its
     positive difference to the frame before (zero at the first frame)."""
     spec = log_spectrum(frame_audio(y))
-    diff = np.zeros_like(spec)
-    diff[1:] = np.maximum(spec[1:] - spec[:-1], 0.0)
-    return np.hstack([spec, diff])
+    return with_onsets(spec, spec[:1])
+
+
+def with_onsets(spec: np.ndarray, before: np.ndarray) -> np.ndarray:
+    """(n, 2 * n_bands) the network's input: log spectra ``spec`` and their positive
+    difference to the frame before (``before``, (1, n_bands), for the first)."""
+    return np.hstack([spec, np.maximum(np.diff(spec, axis=0, prepend=before), 0.0)])
 
 
 @functools.cache
@@ -184,8 +188,8 @@ class BeatActivationStream:
             return np.zeros((0, 2), np.float32)
         frames = np.lib.stride_tricks.sliding_window_view(self._audio, FRAME)[::HOP][:m]
         spec = log_spectrum(frames)
-        diff = np.maximum(np.diff(spec, axis=0, prepend=self._prev_spec), 0.0)
+        feats = with_onsets(spec, self._prev_spec)
         self._prev_spec = spec[-1:]
         self._audio = self._audio[m * HOP :]
         self.samples += m * HOP
-        return self._net.run(np.hstack([spec, diff]))
+        return self._net.run(feats)

@@ -105,6 +105,7 @@ from quaddance.music.analysis import (
     autocorrelation,
     backbeat_heard,
     beat_profile,
+    blend,
     harmonic_salience,
     offbeat_harmony,
     swing_shift,
@@ -634,9 +635,8 @@ class _Onsets:
         # BeatNet's activation, normalised as the flux is: its broad humps between the beats
         # sink below the floor, its peaks stay.
         learned = self._normalise("l", spectrum.learned)
-        w = ANALYSER_CFG.beatnet_weight
-        tempo = (1.0 - w) * tempo + w * learned
-        beat = (1.0 - w) * beat + w * learned
+        tempo = blend(tempo, learned, ANALYSER_CFG.beatnet_weight)
+        beat = blend(beat, learned, ANALYSER_CFG.beatnet_weight)
         return _Frame(
             tempo, beat, low, full, spectrum.rms, spectrum.mel_db, spectrum.bass_chroma,
             spectrum.learned_down,
