@@ -190,7 +190,7 @@ def test_offbeat_harmony_says_where_the_bass_changes_pitch() -> None:
     cfg = AnalysisConfig()
     assert not offbeat_harmony(chroma, beats, cfg)
     assert offbeat_harmony(chroma, beats + step // 2, cfg)
-    assert offbeat_harmony(chroma, beats[:8] + step // 2, cfg)  # 7 intervals, the online minimum
+    assert offbeat_harmony(chroma, beats[:9] + step // 2, cfg)  # 8 beats, the analyser's minimum
     assert not offbeat_harmony(np.ones((12, n_frames)), beats + step // 2, cfg)
 
 

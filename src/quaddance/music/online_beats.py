@@ -1,8 +1,7 @@
 """Online (causal) beat, tempo, downbeat and energy tracking for ``quaddance live``.
 
 The tracker sees the audio block by block and never looks ahead. Per 11.6 ms frame (hop 256 at
-22.05 kHz) it computes, from a 46 ms window that ends at the newest sample (a 93 ms one for the
-bass chroma of item 5):
+22.05 kHz) it computes, from a 46 ms window that ends at the newest sample:
 
 1. Onset envelopes, as in the offline analyser (``music/analysis.py``) but with causal
    normalisation (running means instead of centred ones) and without its own learned
@@ -58,13 +57,10 @@ bass chroma of item 5):
    drums, or chosen after a tempo change), which stay supported. Every ``SWING_BEATS`` beats
    the onsets are folded over the reported grid, and the offline analyser's swing test
    (``analysis.swing_shift``, stricter here) moves the grid onto the beat.
-   Off-beats: a grid held on straight off-beats (hats, skanks or stabs between the beats, which
-   the score can prefer, most often when the tracker starts listening in the middle of a song)
-   is found by the offline analyser's bass-harmony test (``analysis.offbeat_harmony``): at every
-   beat while locked, the grid carried back over the music heard so far is tested, and when
-   the bass line changes pitch at its midpoints rather than at its beats, twice in a row, the
-   grid moves half a beat. At the lock both tests also run on the heard grid (there, once is
-   enough), so that a lock reached on the off-beats is moved before its beats are danced to.
+   At the lock the swing test also runs on the heard grid, so that a lock reached on swung
+   off-beats is moved before its beats are danced to. (The offline analyser's bass-harmony
+   off-beat test is not run here: on real music it moved the grid off the beat more often than
+   onto it.)
 6. Downbeats (4/4): the bar position whose beats carry the most kick/bass-band onsets, chord
    changes and BeatNet's downbeat probability over the last bars, with hysteresis.
 7. Energy: RMS mapped to [0, 1] by the 5th and 95th percentiles of the last 30 s (the offline
@@ -107,7 +103,6 @@ from quaddance.music.analysis import (
     beat_profile,
     blend,
     harmonic_salience,
-    offbeat_harmony,
     swing_shift,
 )
 from quaddance.music.audio import DEFAULT_SR
@@ -131,13 +126,6 @@ LATENCY_S = 0.025
 """A beat is reported at most this long after it happens, for blocks of at most this length
 (the default block is 11.6 ms): beats are predicted half a beat ahead and reported by the first
 ``update`` whose block ends at or after the predicted time."""
-
-BASS_N_FFT = 2048
-"""Window of the bass chroma (the off-beat test's), samples: the offline analyser's, 10.8 Hz
-bins. The 21.5 Hz bins of ``N_FFT`` blur neighbouring bass notes: with them the test moved
-tuning songs off the beat (`tune_skank_118` from the start F 0.99 -> 0.00; songs within 0.1 of
-the offline F 57 -> 55 of 67 from the start, 48 -> 46 joined mid-song). Its frames end at the
-newest sample, as the onset frames do."""
 
 WINDOW_DELAY_S = (N_FFT / 2) / SR_HZ
 """An onset shows in the flux when it reaches the middle of the window: onset frame times are
@@ -244,7 +232,7 @@ BACKBEAT_MIN_PERIODS = 3
 """Beat periods of the recent music that the backbeat test (item 2) folds together: the last
 4, at least 3 (2 let the first second's noise through: a 60 BPM click track doubled)."""
 ANALYSER_CFG = AnalysisConfig()
-"""The settings of the backbeat and off-beat tests, the offline analyser's. The backbeat test
+"""The settings of the backbeat test, the offline analyser's. The backbeat test
 (`analysis.backbeat_heard`): the tempo doubles when the midpoints between the beats carry hits
 about as strong as the beats and clearly stronger than the quarter-beat positions (a snare
 backbeat heard at half tempo), while the doubled tempo stays at most
@@ -275,20 +263,6 @@ most, this fraction of the profile's peak."""
 SWING_LOCK_MIN_BEATS = 4
 """At the lock the swing test runs on the grid carried back over the music heard, at most
 ``SWING_BEATS`` and at least this many beat intervals of it."""
-
-OFFBEAT_MIN_BEATS = 7
-OFFBEAT_MAX_BEATS = 16
-"""The off-beat test (item 5) runs on the grid carried back over the last this many beat
-intervals heard (8 s of history hold 16 at 120 BPM), at least ``OFFBEAT_MIN_BEATS`` (the
-offline analyser's minimum, 8 beats: over fewer, one bar's bass line decides)."""
-OFFBEAT_VOTES = 2
-"""Runs of the off-beat test in a row (one per beat while locked, where it can run) that must
-say so before the grid moves: on windows that differ by one beat, a grid whose bass changes
-about as often at its midpoints as at its beats passes the test's ratio now and then (with one
-vote, two tuning songs joined mid-song went off the beat: a tempo ramp, F 0.77 -> 0.00, and a
-random dnb song, 0.71 -> 0.15; with two, neither did)."""
-OFFBEAT_REST_BEATS = 4
-"""Beats after a move of the grid before the off-beat test runs again."""
 
 FALLBACK_S = 5.5
 """Music heard (since the start or a silence reset) after which a tracker told ``song_start``
@@ -442,7 +416,6 @@ class _Spectrum(NamedTuple):
     high_flux: float  # log1p flux, mean over the treble band
     rms: float
     mel_db: np.ndarray  # (N_MELS,) mel spectrum, dB below the loudness reference
-    bass_chroma: np.ndarray  # (12,) power of the bass band per pitch class
     silent_frames: int  # silent frames in a row, this one included (0: not silent; silent is
     # quieter than SILENCE_DB below the loudness peak, or than SILENCE_ABS_RMS)
     restart: bool  # the first sound after SILENCE_RESET_S of silence: heard as a stream start
@@ -459,7 +432,6 @@ class _Frame(NamedTuple):
     full_flux: float  # the front end's, not normalised (steady noise has a steady flux)
     rms: float
     mel_db: np.ndarray  # (N_MELS,)
-    bass_chroma: np.ndarray  # (12,) power of the bass band per pitch class
     learned_down: float  # BeatNet's P(downbeat)
 
 
@@ -470,7 +442,7 @@ long."""
 
 
 class _Features:
-    """Causal framing, mel spectrum, its fluxes, RMS and bass chroma (shared by the
+    """Causal framing, mel spectrum, its fluxes, RMS and BeatNet's activation (shared by the
     listeners)."""
 
     def __init__(self) -> None:
@@ -484,13 +456,7 @@ class _Features:
         self.low = mel_hz <= LOW_BAND_HZ
         self.high = mel_hz >= HIGH_BAND_HZ
         self.chord_bands = (mel_hz >= CHORD_BAND_HZ[0]) & (mel_hz <= CHORD_BAND_HZ[1])
-        # The bass chroma as the offline analyser's, from a longer window (`BASS_N_FFT`).
-        wide = filterbanks(SR_HZ, BASS_N_FFT, ANALYSER_CFG.n_mels)
-        bass = (wide.freqs_hz >= 30.0) & (wide.freqs_hz <= ANALYSER_CFG.bass_chroma_max_hz)
-        self.bass_bins = np.flatnonzero(bass)
-        self.bass_chroma_t = np.ascontiguousarray(wide.chroma[:, bass].T, dtype=np.float64)
-        self.bass_window = np.hanning(BASS_N_FFT + 1)[:-1]
-        self.tail = np.zeros(BASS_N_FFT - HOP, dtype=np.float32)
+        self.tail = np.zeros(N_FFT - HOP, dtype=np.float32)
         self.pending = np.zeros(0, dtype=np.float32)
         self.ref_power = 0.0
         self.prev_db: np.ndarray | None = None
@@ -512,15 +478,12 @@ class _Features:
         new = self.pending[:used]
         audio = np.concatenate([self.tail, new])
         self.pending = self.pending[used:]
-        self.tail = audio[-(BASS_N_FFT - HOP) :]
-        idx = np.arange(n_frames)[:, None] * HOP + np.arange(BASS_N_FFT)[None, :]
-        wide = audio[idx].astype(np.float64)
-        frames = wide[:, BASS_N_FFT - N_FFT :]  # the onset windows end at the same sample
+        self.tail = audio[-(N_FFT - HOP) :]
+        idx = np.arange(n_frames)[:, None] * HOP + np.arange(N_FFT)[None, :]
+        frames = audio[idx].astype(np.float64)
         rms = np.sqrt(np.mean(frames**2, axis=1))
         power = np.abs(np.fft.rfft(frames * self.window, axis=1)) ** 2
         mel = power @ self.mel_fb_t  # (n_frames, n_mels)
-        bass_spec = np.fft.rfft(wide * self.bass_window, axis=1)[:, self.bass_bins]
-        bass_chroma = (np.abs(bass_spec) ** 2) @ self.bass_chroma_t  # (n_frames, 12)
         silent, restart = zip(*(self._silence(float(r)) for r in rms), strict=True)
         # BeatNet's stream starts again with the music after a silence, as from a file's start.
         cuts = [0, *(i for i in range(1, n_frames) if restart[i]), n_frames]
@@ -528,7 +491,7 @@ class _Features:
             [self._learned(new[a * HOP : b * HOP], restart[a]) for a, b in itertools.pairwise(cuts)]
         )
         return [
-            self._spectrum(mel[i], float(rms[i]), bass_chroma[i], learned[i], silent[i], restart[i])
+            self._spectrum(mel[i], float(rms[i]), learned[i], silent[i], restart[i])
             for i in range(n_frames)
         ]
 
@@ -564,7 +527,6 @@ class _Features:
         self,
         mel: np.ndarray,
         rms: float,
-        bass_chroma: np.ndarray,
         learned: np.ndarray,
         silent_frames: int,
         restart: bool,
@@ -588,7 +550,6 @@ class _Features:
             float(flux_log[self.high].mean()),
             rms,
             db,
-            bass_chroma,
             silent_frames,
             restart,
             float(learned.sum()),
@@ -638,8 +599,7 @@ class _Onsets:
         tempo = blend(tempo, learned, ANALYSER_CFG.beatnet_weight)
         beat = blend(beat, learned, ANALYSER_CFG.beatnet_weight)
         return _Frame(
-            tempo, beat, low, full, spectrum.rms, spectrum.mel_db, spectrum.bass_chroma,
-            spectrum.learned_down,
+            tempo, beat, low, full, spectrum.rms, spectrum.mel_db, spectrum.learned_down
         )  # fmt: skip
 
     def _normalise(self, key: str, x: float) -> float:
@@ -824,7 +784,6 @@ class _Listener:
         self._low: list[float] = []
         self._flux: list[float] = []  # full-band flux per frame (`_bursty`)
         self._mel: list[np.ndarray] = []  # mel spectrum per frame, dB
-        self._bass: list[np.ndarray] = []  # bass chroma per frame
         self._down: list[float] = []  # BeatNet's P(downbeat) per frame
         self._pending_bar: list[int] = []  # frames of reported beats not yet in the bar count
         self._beats_counted = 0
@@ -857,9 +816,6 @@ class _Listener:
         self._three_four_votes = 0  # tempo estimates in a row at which it said so
         self._misses = 0
         self._swing_tested = 0  # len(self._support) when the swing test last moved the grid
-        self._offbeat_next = 0  # len(self._support) from which the off-beat test runs again
-        self._offbeat_votes = 0  # beats in a row at which the off-beat test said so
-        self._lock_beat = 0  # len(self._support) at the lock
         self._last_beat_s = float("nan")
         self._heard_frames = 0
 
@@ -910,7 +866,6 @@ class _Listener:
         self._low.append(frame.low_onset)
         self._flux.append(frame.full_flux)
         self._mel.append(frame.mel_db)
-        self._bass.append(frame.bass_chroma)
         self._down.append(frame.learned_down)
         self._cum.append(cum)
         excess = len(self._cum) - self._hist_len
@@ -921,7 +876,6 @@ class _Listener:
                 self._low,
                 self._flux,
                 self._mel,
-                self._bass,
                 self._down,
                 self._cum,
             ):
@@ -1155,14 +1109,10 @@ class _Listener:
             self._update_lock(supported, onset, i)
             if self._locked and not was_locked:
                 # The lock's grid has few reported beats, but the music before them was
-                # heard: both tests run on the grid carried back over it, and move it at once.
-                self._lock_beat = len(self._support)
-                self._offbeat_next = 0
+                # heard: the swing test runs on the grid carried back over it.
                 self._swing_at_lock(onset, i)
-                self._offbeat_guard(i, votes=1)
             elif self._locked:
                 self._swing_guard(onset)
-                self._offbeat_guard(i, votes=OFFBEAT_VOTES)
 
     def _grid_frames(self, i: int, n: int) -> np.ndarray:
         """History frames of the last ``n`` beats of the current grid that ends at history
@@ -1211,33 +1161,6 @@ class _Listener:
             return
         self._shift_grid(shift)
         self._swing_tested = len(self._support)
-
-    def _offbeat_guard(self, i: int, votes: int) -> None:
-        """Move the reported grid half a beat when the off-beat test (`analysis.offbeat_harmony`)
-        on the grid that ends at history frame ``i``, carried back over the music heard (at
-        most `OFFBEAT_MAX_BEATS` intervals, at least `OFFBEAT_MIN_BEATS`), has said so
-        ``votes`` runs in a row."""
-        if len(self._support) < self._offbeat_next:
-            return
-        period = self._period
-        # A whole period before the first beat is heard too: its change is measured from there.
-        n = min(OFFBEAT_MAX_BEATS, int((i - period) // period))
-        if n < OFFBEAT_MIN_BEATS:
-            return
-        # The tempo stayed steady over the reported beats since the lock, and the beats of the
-        # lock before it (earlier estimates may be the settling filter's): the grid carried
-        # back at the current period is the music's.
-        m = min(n, len(self._support) - self._lock_beat + LOCK_RETRO_BEATS)
-        if not _steady(self._period_at_beats[-m:]):
-            return
-        if not offbeat_harmony(np.asarray(self._bass).T, self._grid_frames(i, n + 1), ANALYSER_CFG):
-            self._offbeat_votes = 0
-            return
-        self._offbeat_votes += 1
-        if self._offbeat_votes >= votes:
-            self._offbeat_votes = 0
-            self._shift_grid(0.5)
-            self._offbeat_next = len(self._support) + OFFBEAT_REST_BEATS + 1
 
     def _shift_grid(self, beats: float) -> None:
         """Move the reported grid ``beats`` later, the beats already predicted on it too; the
