@@ -146,29 +146,38 @@ def _beat(time_s: float) -> BeatEvent:
     return BeatEvent(time_s, time_s, 0, 0, 120.0, True, 1.0)
 
 
-def test_online_beats_stay_in_order_when_the_tracker_changes_listener():
+def _reported_s(tracker: OnlineBeatTracker, t_end_s: float) -> list[float]:
+    return [b.time_s for b in tracker.update(np.zeros(0), t_end_s)]
+
+
+def _stand_in_tracker() -> tuple[OnlineBeatTracker, _Listener, _Listener]:
+    """A tracker whose two listeners are stand-ins; the first is locked."""
     tracker = OnlineBeatTracker()
     first, joined = _Listener(), _Listener()
     tracker._first, tracker._joined = first, joined
-    first.locked, first.beats = True, [_beat(1.0)]
-    assert [b.time_s for b in tracker.update(np.zeros(0), 1.0)] == [1.0]
+    first.locked = True
+    return tracker, first, joined
+
+
+def test_online_beats_stay_in_order_when_the_tracker_changes_listener():
+    tracker, first, joined = _stand_in_tracker()
+    first.beats = [_beat(1.0)]
+    assert _reported_s(tracker, 1.0) == [1.0]
     # The first listener loses its lock; the other, locked on its own grid, takes over.
     first.locked, joined.locked, joined.heard_s = False, True, 10.0
     first.heard_s = 10.0
     joined.beats = [_beat(0.9), _beat(1.1), _beat(1.3)]
-    assert [b.time_s for b in tracker.update(np.zeros(0), 1.3)] == [1.3]
+    assert _reported_s(tracker, 1.3) == [1.3]
 
 
 def test_online_beats_stay_in_order_where_a_held_grid_is_dropped():
     # A listener held a grid after the score's beats and reported its beat at 19.816 s; the
     # grid dropped (a lost lock), the score's own next beat came at 19.876 s.
-    tracker = OnlineBeatTracker()
-    first, joined = _Listener(), _Listener()
-    tracker._first, tracker._joined = first, joined
-    first.locked, first.beats = True, [_beat(19.816)]
-    assert [b.time_s for b in tracker.update(np.zeros(0), 19.82)] == [19.816]
+    tracker, first, _ = _stand_in_tracker()
+    first.beats = [_beat(19.816)]
+    assert _reported_s(tracker, 19.82) == [19.816]
     first.beats = [_beat(19.876), _beat(20.27)]
-    assert [b.time_s for b in tracker.update(np.zeros(0), 20.3)] == [20.27]
+    assert _reported_s(tracker, 20.3) == [20.27]
 
 
 @settings(_SETTINGS, max_examples=60)
