@@ -122,7 +122,7 @@ def _session():
     import onnxruntime as ort
 
     opts = ort.SessionOptions()
-    # One thread: the analysis runs beside the simulation, and a stream steps one frame.
+    # One thread: the analysis runs beside the simulation, and a stream runs a few frames a block.
     opts.intra_op_num_threads = opts.inter_op_num_threads = 1
     return ort.InferenceSession(str(WEIGHTS_DIR / MODEL), opts, providers=["CPUExecutionProvider"])
 
