@@ -31,7 +31,7 @@ def _write(tmp_path: Path, name: str, text: str) -> Path:
     [
         ("plain.txt", "0.5\n1.0\n1.5\n2.0\n2.5\n"),
         ("comments.txt", "# beats of a song\n\n0.5\n1.0  # one\n\n1.5\n2.0\n2.5"),
-        ("sonic_visualiser.csv", "0.500000000,1\n1.000000000,2\n1.5,3\n2.0,4\n2.5,1\n"),
+        ("sonic_visualiser.csv", "0.500000000,1\n1.000000000,2\n1.5,3\n2.0,4\n2.5,5\n"),
         ("audacity.txt", "0.5\t0.5\tb\n\\\t100.0\t2000.0\n1.0\t1.0\tb\n1.5\t1.5\n2\t2\n2.5\n"),
         ("beats.json", json.dumps({"beats_s": list(BEATS_S)})),
         ("beats", '  {"beats_s": [0.5, 1, 1.5, 2, 2.5], "source": "by hand"}'),
@@ -40,6 +40,38 @@ def _write(tmp_path: Path, name: str, text: str) -> Path:
 def test_each_format_reads_to_its_beats(tmp_path, name, text):
     beats = read_beats(_write(tmp_path, name, text))
     assert beats.beats_s == BEATS_S and beats.downbeats_s is None and beats.name == name
+
+
+@pytest.mark.parametrize(
+    ("name", "text", "downbeats_s"),
+    [
+        # madmom's DBNDownBeatTracker: time, tab, beat of the bar; the first bar part-way.
+        ("madmom.beats", "0.5\t3\n1.0\t4\n1.5\t1\n2.0\t2\n2.5\t3\n", (1.5,)),
+        ("ballroom.beats", "0.5 1\n1.0 2\n1.5 3\n2.0 1\n2.5 2\n", (0.5, 2.0)),  # 3/4
+        ("harmonix.txt", "0.5\t1\t1\n1.0\t2\t1\n1.5\t3\t1\n2.0\t4\t1\n2.5\t1\t2\n", (0.5, 2.5)),
+    ],
+)
+def test_a_second_column_that_counts_the_bar_s_beats_gives_the_downbeats(
+    tmp_path, name, text, downbeats_s
+):
+    beats = read_beats(_write(tmp_path, name, text))
+    assert beats.beats_s == BEATS_S and beats.downbeats_s == downbeats_s
+
+
+@pytest.mark.parametrize(
+    "column",
+    [
+        ["1", "2", "4", "1", "2"],  # skips a beat: not a count
+        ["2", "3", "4", "5", "6"],  # no 1
+        ["1", "2", "3", "4", "5"],  # never a new bar: a label's numbering (Sonic Visualiser's)
+        ["1", "2", "3", "4", ""],  # a line without it
+        ["1", "1.5", "1", "2", "3"],  # not whole numbers
+        ["11", "12", "13", "1", "2"],  # past MAX_BAR_BEATS
+    ],
+)
+def test_any_other_second_column_gives_no_downbeats(tmp_path, column):
+    text = "\n".join(f"{t} {c}".strip() for t, c in zip(BEATS_S, column, strict=True))
+    assert read_beats(_write(tmp_path, "b.txt", text)).downbeats_s is None
 
 
 def test_json_downbeats_are_kept(tmp_path):

@@ -48,8 +48,9 @@ BeatsOpt = Annotated[
     Path | None,
     typer.Option(
         help="The song's beats from another tool, in place of the tracker's: a text file, one "
-        "time (s) a line (a first column of a label export), or JSON with beats_s (and "
-        "downbeats_s).",
+        "time (s) a line (a first column of a label export; a second column counting each "
+        "bar's beats, as madmom's DBNDownBeatTracker writes, gives the downbeats), or JSON "
+        "with beats_s (and downbeats_s).",
     ),
 ]
 RobotIpOpt = Annotated[str, typer.Option(help="go1: the robot's low-level IP.")]

@@ -5,7 +5,9 @@ Two formats:
 - text: one time in seconds a line; blank lines and ``#`` comments are skipped; a line may
   hold more columns, separated by whitespace or commas, of which the first is the time (the
   label exports of Sonic Visualiser and Audacity; Audacity's ``\\`` lines of a label's
-  frequency range are skipped);
+  frequency range are skipped). When the second column counts the beats of each bar on every
+  line (1, 2, 3, 4, 1, ...: the output of madmom's ``DBNDownBeatTracker``, the beat
+  annotations of the Ballroom, GTZAN and Harmonix sets), its 1s are the downbeats;
 - JSON (a ``.json`` name, or a file that opens with ``{``): an object with ``beats_s``, a list
   of seconds, and optionally ``downbeats_s``.
 
@@ -16,6 +18,7 @@ The dance composer (`quaddance.pipeline.compose`) puts the beats in the choreogr
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import re
@@ -33,6 +36,8 @@ from quaddance.music.analysis import MIN_BEAT_GAP_S
 MIN_BEATS = 4
 #: Farthest a downbeat may be from the nearest beat, s (a rounding of the same time).
 DOWNBEAT_ON_BEAT_S = 0.01
+#: Most beats in a bar that a text file's second column may count (12/8 counted in eighths).
+MAX_BAR_BEATS = 12
 
 _SEPARATOR = re.compile(r"[\s,]+")
 
@@ -82,7 +87,7 @@ def read_beats(path: Path) -> BeatList:
     if path.suffix.lower() == ".json" or text.lstrip().startswith("{"):
         beats, downbeats = _json_times(path, text)
     else:
-        beats, downbeats = _text_times(path, text), None
+        beats, downbeats = _text_times(path, text)
     _check_times(path, "beat", beats)
     if len(beats) < MIN_BEATS:
         raise InputFileError(path, f"{len(beats)} beats; at least {MIN_BEATS} are needed")
@@ -100,21 +105,38 @@ def read_beats(path: Path) -> BeatList:
     return BeatList(path, tuple(beats), None if downbeats is None else tuple(downbeats))
 
 
-def _text_times(path: Path, text: str) -> list[float]:
+def _text_times(path: Path, text: str) -> tuple[list[float], list[float] | None]:
     """The first column of each line that is not blank, a comment or an Audacity ``\\``
-    line; one line naming the line that is not a number."""
-    times = []
+    line, and the downbeats its second column gives (`_bar_downbeats`); one line naming the
+    line that is not a number."""
+    times, seconds = [], []
     for n, line in enumerate(text.splitlines(), start=1):
-        field = _SEPARATOR.split(line.split("#", 1)[0].strip(), maxsplit=1)[0]
-        if field in ("", "\\"):
+        fields = _SEPARATOR.split(line.split("#", 1)[0].strip(), maxsplit=2)
+        if fields[0] in ("", "\\"):
             continue
         try:
-            times.append(float(field))
+            times.append(float(fields[0]))
         except ValueError:
-            raise InputFileError(path, f"line {n}: {field[:40]!r} is not a number") from None
+            raise InputFileError(path, f"line {n}: {fields[0][:40]!r} is not a number") from None
+        seconds.append(fields[1] if len(fields) > 1 else "")
     if not times:
         raise InputFileError(path, "no beat times (only blank lines and comments)")
-    return times
+    return times, _bar_downbeats(times, seconds)
+
+
+def _bar_downbeats(times: list[float], column: list[str]) -> list[float] | None:
+    """The times whose ``column`` entry is 1, where that column counts the beats of each bar
+    on every line: whole numbers 1 to `MAX_BAR_BEATS`, each one more than the last or a new
+    bar's 1, with at least one new bar (the first bar may start part-way; a count that never
+    starts again is a label's numbering); None where it is anything else."""
+    if not all(c.isdigit() for c in column):
+        return None
+    counts = [int(c) for c in column]
+    if 1 not in counts[1:] or min(counts) < 1 or max(counts) > MAX_BAR_BEATS:
+        return None
+    if any(b not in (1, a + 1) for a, b in itertools.pairwise(counts)):
+        return None
+    return [t for t, c in zip(times, counts, strict=True) if c == 1]
 
 
 def _json_times(path: Path, text: str) -> tuple[list[float], list[float] | None]:
