@@ -394,8 +394,8 @@ def test_the_analyser_reports_a_level_inside_the_dance_range(click_bpm, level_bp
 def test_beats_keep_their_phase_through_a_passage_of_louder_off_beats(seed: int) -> None:
     # 140 BPM kicks on the beat; for 12 s in the middle the kicks drop to half and a snare
     # twice as loud plays each off-beat, then the song goes on as before. The beats stay on
-    # the kicks, as a dancer keeps the step (`AnalysisConfig.tightness`): at librosa-like
-    # looseness (300) they slid onto the snares and back (F 0.67-0.70).
+    # the kicks, as a dancer keeps the step (`AnalysisConfig.tightness`): at a looser 300
+    # they slid onto the snares and back (F 0.67-0.70).
     rng = np.random.default_rng(seed)
     y = np.zeros(int(40.0 * SR), dtype=np.float32)
     t = np.arange(int(0.15 * SR)) / SR

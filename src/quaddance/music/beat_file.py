@@ -109,7 +109,7 @@ def _text_times(path: Path, text: str) -> tuple[list[float], list[float] | None]
     """The first column of each line that is not blank, a comment or an Audacity ``\\``
     line, and the downbeats its second column gives (`_bar_downbeats`); one line naming the
     line that is not a number."""
-    times, seconds = [], []
+    times, second_column = [], []
     for n, line in enumerate(text.splitlines(), start=1):
         fields = _SEPARATOR.split(line.split("#", 1)[0].strip(), maxsplit=2)
         if fields[0] in ("", "\\"):
@@ -118,10 +118,10 @@ def _text_times(path: Path, text: str) -> tuple[list[float], list[float] | None]
             times.append(float(fields[0]))
         except ValueError:
             raise InputFileError(path, f"line {n}: {fields[0][:40]!r} is not a number") from None
-        seconds.append(fields[1] if len(fields) > 1 else "")
+        second_column.append(fields[1] if len(fields) > 1 else "")
     if not times:
         raise InputFileError(path, "no beat times (only blank lines and comments)")
-    return times, _bar_downbeats(times, seconds)
+    return times, _bar_downbeats(times, second_column)
 
 
 def _bar_downbeats(times: list[float], column: list[str]) -> list[float] | None:
