@@ -122,9 +122,9 @@ def test_offline_beats_increase_at_least_the_gap_apart(y: np.ndarray):
 
 
 def test_online_beats_stay_in_order_on_a_real_song():
-    # boogie_marabi from its start, where the tracker once reported a held grid's beat at
-    # 19.816 s and then, the grid dropped, the score's own at 19.876 s (the case is replayed
-    # below with a stand-in listener: the tracker no longer holds a grid there).
+    # boogie_marabi from its start, around 19.8 s, where a held grid that is dropped can
+    # report a beat 60 ms before the score's own (that case, with the times it had, is
+    # replayed below with a stand-in listener).
     source = FileSource(ROOT / "audio" / "boogie_marabi.ogg", realtime=False)
     y = source.y[: int(20.5 * source.sr_hz)]
     track = track_samples(y, source.sr_hz)

@@ -506,9 +506,9 @@ def test_tracker_joining_a_song_on_its_skank_moves_onto_the_beat_by_the_lock(
 ) -> None:
     """The tuning song skank_132_sync joined mid-song (0.37 of a beat after a beat, as `bench
     live` joins), by a tracker told that the audio starts with the song: its loudest pulse is
-    the skank chords on the off-beats, and with flux onsets alone the tracker locked on them
-    and kept them to the end. BeatNet's activation in the beat score puts it on the beats
-    (without a bass-harmony test, which once moved the grid there)."""
+    the skank chords on the off-beats, and with flux onsets alone the tracker locks on them
+    and keeps them to the end. BeatNet's activation in the beat score puts it on the beats,
+    with no bass-harmony test."""
     from benchmarks.live import join_mid_song
 
     joined, _ = join_mid_song(_tuning_midi_song("skank_132_sync", tmp_path), SR_HZ)
@@ -658,9 +658,9 @@ def test_tracker_rejects_another_sample_rate() -> None:
 def test_tracker_stays_on_the_beat_of_a_real_song() -> None:
     """the_hobo, a song written by people elsewhere (OpenTTD's OpenMSX set, in the tuning part
     of `benchmarks/real_music`): the tracker locks within 6 s and reports its beats, not its
-    off-beats. The bass-harmony off-beat test that the tracker once ran moved this grid half a
-    beat again and again (F 0.85 after the lock); on the real-music sets it moved grids off the
-    beat more often than onto it, and was removed."""
+    off-beats. The offline analyser's bass-harmony off-beat test, run online, moves this grid
+    half a beat again and again (F 0.85 after the lock); on the real-music sets it moves grids
+    off the beat more often than onto it, so the tracker does not run it."""
     from benchmarks.beats import metrical_level_f_measure
     from benchmarks.real_music import ROOT, load_songs
     from quaddance.music.live import track_file
