@@ -67,6 +67,7 @@ def test_a_second_column_that_counts_the_bar_s_beats_gives_the_downbeats(
         ["1", "2", "3", "4", ""],  # a line without it
         ["1", "1.5", "1", "2", "3"],  # not whole numbers
         ["11", "12", "13", "1", "2"],  # past MAX_BAR_BEATS
+        ["1", "2", "\u00b2", "1", "2"],  # a superscript two: a digit, not a number
     ],
 )
 def test_any_other_second_column_gives_no_downbeats(tmp_path, column):

@@ -129,7 +129,7 @@ def _bar_downbeats(times: list[float], column: list[str]) -> list[float] | None:
     on every line: whole numbers 1 to `MAX_BAR_BEATS`, each one more than the last or a new
     bar's 1, with at least one new bar (the first bar may start part-way; a count that never
     starts again is a label's numbering); None where it is anything else."""
-    if not all(c.isdigit() for c in column):
+    if not all(c.isdecimal() for c in column):  # what int() reads (isdigit lets '²' by)
         return None
     counts = [int(c) for c in column]
     if 1 not in counts[1:] or min(counts) < 1 or max(counts) > MAX_BAR_BEATS:
