@@ -80,6 +80,7 @@ LICENCES = {
     "Artistic-2.0": "https://opensource.org/license/artistic-2-0",
     "CC-BY-SA-4.0": "https://creativecommons.org/licenses/by-sa/4.0/",
     "BSD-2-Clause": "https://opensource.org/license/bsd-2-clause",
+    "BSD-3-Clause": "https://opensource.org/license/bsd-3-clause",
 }
 
 

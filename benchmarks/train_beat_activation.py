@@ -8,7 +8,8 @@ negative one, the two classes weighted equally (scikit-learn's logistic regressi
 
 ``--cross-validate`` measures the analyser (F at its metrical level, +-70 ms) with each
 ``--weights`` share of the activation, leaving one artist of the tuning songs out of the fit at
-a time and scoring that artist's songs: how ``AnalysisConfig.activation_weight`` was chosen.
+a time and scoring that artist's songs: how ``AnalysisConfig.activation_weight`` was first
+chosen (it is now tuned with BeatNet's share, ``python -m benchmarks.analyser_mix``).
 
     python -m benchmarks.train_beat_activation [--out FILE] [--cross-validate]
 """

@@ -211,13 +211,19 @@ def test_the_analyser_mixes_beatnet_into_its_envelopes_only_when_asked(
     from quaddance.music import analysis
 
     y = reference["audio"]
-    on = analysis._features(y, ba.SR_HZ, analysis.AnalysisConfig())
-    assert on.beatnet.shape == (len(on.raw_onset), 2)
-    # The activation at the onset frames is BeatNet's own, read at the same times.
+    once = analysis._features(y, ba.SR_HZ, analysis.AnalysisConfig(beatnet_stretches=(1.0,)))
+    assert once.beatnet.shape == (len(once.raw_onset), 2)
+    # Heard once, the activation at the onset frames is BeatNet's own, read at the same times.
     own = ba.beat_activation(y, ba.SR_HZ)
-    at = np.round(np.arange(len(on.raw_onset)) / on.fps * ba.FPS).astype(int)
+    at = np.round(np.arange(len(once.raw_onset)) / once.fps * ba.FPS).astype(int)
     inside = at < len(own)
-    assert np.corrcoef(on.beatnet[inside, 0], own[at[inside], 0])[0, 1] > 0.95
+    assert np.corrcoef(once.beatnet[inside, 0], own[at[inside], 0])[0, 1] > 0.95
+    # By default it is heard at several speeds: another activation, still on the same beats.
+    on = analysis._features(y, ba.SR_HZ, analysis.AnalysisConfig())
+    assert len(analysis.AnalysisConfig().beatnet_stretches) > 1
+    assert on.beatnet.shape == once.beatnet.shape
+    assert not np.allclose(on.beatnet, once.beatnet, atol=1e-3)
+    assert np.corrcoef(on.beatnet[:, 0], once.beatnet[:, 0])[0, 1] > 0.8
 
     def no_network(*args: object) -> None:
         raise AssertionError("BeatNet ran with beatnet_weight = 0")
@@ -226,6 +232,25 @@ def test_the_analyser_mixes_beatnet_into_its_envelopes_only_when_asked(
     off = analysis._features(y, ba.SR_HZ, analysis.AnalysisConfig(beatnet_weight=0.0))
     assert off.beatnet.shape == (len(off.raw_onset), 0)
     assert not np.allclose(off.beat_onset, on.beat_onset)
+
+
+@pytest.mark.parametrize("stretch", [0.9, 1.1])
+def test_a_song_heard_faster_or_slower_maps_back_onto_its_own_time(reference, stretch) -> None:
+    from quaddance.music import analysis
+
+    y, fps = reference["audio"], 100.0
+    n = round(len(y) / ba.SR_HZ * fps)
+    once = analysis._beatnet_frames(y, ba.SR_HZ, n, fps, (1.0,))[:, 0]
+    heard = analysis._beatnet_frames(y, ba.SR_HZ, n, fps, (stretch,))[:, 0]
+    # The stretched copy is 0.5 s longer or shorter over these 5 s: read back at the wrong
+    # rate, its peaks would drift off the song's beats by up to 50 frames here.
+    lags = np.arange(-10, 11)
+    corr = [np.corrcoef(np.roll(heard, lag)[20:-20], once[20:-20])[0, 1] for lag in lags]
+    assert abs(lags[int(np.argmax(corr))]) <= 2
+    assert max(corr) > 0.7
+    beats = np.round(reference["beats_s"] * fps).astype(int)
+    beats = beats[beats < n]
+    assert heard[beats].mean() > 3.0 * heard.mean()
 
 
 def test_the_online_front_end_reads_beatnet_causally_in_any_blocks(reference) -> None:

@@ -37,7 +37,7 @@ HIT_WINDOW_S = 0.07
 """Beats count as right within +-70 ms (the F-measure window)."""
 
 XFAIL_BEATNET = (
-    "BeatNet's activation in the online beat score (ANALYSER_CFG.beatnet_weight = 0.5) lifts "
+    "BeatNet's activation in the online beat score (BEATNET_WEIGHT = 0.5) lifts "
     "real music (19 tuning songs: F after the lock 0.779 -> 0.882) and the code-made live sets "
     "(bench live --tracker-only: 45 -> 46 of 46 lock within 6 s), "
 )

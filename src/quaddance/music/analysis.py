@@ -6,12 +6,14 @@ Ellis 2007) with the changes that matter for dance music:
 1. Two onset envelopes from a mel spectrogram, each divided by its local level so that a quiet
    intro counts as much as a loud chorus: one for tempo (dB flux, full band + kick/bass band)
    and one for placing beats (dB flux + treble flux with gentler compression, where snare, hats
-   and cymbals make drum hits stand out from off-beat bass notes and chord stabs). Half of
-   each is a learned beat activation (`music.beat_activation`, fitted on real music with exact
-   beats), which tells the bands that carry the beat from those that carry off-beats; half of
-   the result is BeatNet's beat activation (`music.beatnet`, recurrent networks trained on
-   annotated real music, CC BY 4.0), which hears the beat where the bands alone put it on the
-   off-beats of electronic music.
+   and cymbals make drum hits stand out from off-beat bass notes and chord stabs). A quarter
+   of each is a learned beat activation (`music.beat_activation`, fitted on real music with
+   exact beats), which tells the bands that carry the beat from those that carry off-beats;
+   three quarters of the result is BeatNet's beat activation (`music.beatnet`, recurrent
+   networks trained on annotated real music, CC BY 4.0), which hears the beat where the bands
+   alone put it on the off-beats of electronic music. BeatNet hears the song five times, a
+   little faster and slower, and its activations are averaged: its phase errors depend on the
+   tempo it hears.
 2. The tempo is the lag whose first four multiples carry the most autocorrelation (which rules
    out the "2/3 tempo" error), times a broad log-normal prior centred on the usual dance
    tempi (80-160 BPM), which settles the half/double-tempo choice where the music leaves it
@@ -122,17 +124,22 @@ class AnalysisConfig:
     """Shortest section, bars."""
     section_threshold: float = 1.0
     """Novelty a boundary needs; one unit = 3 dB louder or 50 % more onsets (tuned)."""
-    activation_weight: float = 0.5
+    activation_weight: float = 0.25
     """Share of the learned beat activation (`music.beat_activation`) in both onset envelopes;
-    0 leaves them as measured. Chosen by leaving one artist out of the tuning songs of the
-    real-music sets at a time (``python -m benchmarks.train_beat_activation --cross-validate``)."""
+    0 leaves them as measured (tuned with ``beatnet_weight``)."""
     activation_model: Path | None = None
     """The activation's weights file; None: the shipped ``data/beat_activation.json``."""
-    beatnet_weight: float = 0.5
+    beatnet_weight: float = 0.75
     """Share of BeatNet's beat activation (`music.beatnet`: networks trained on annotated real
     music, CC BY 4.0) in both onset envelopes, after the learned activation's; 0 leaves it out.
-    Chosen on the tuning songs of the real-music sets (an even share; the online tracker mixes
-    it at the same share)."""
+    Tuned with ``activation_weight`` and ``beatnet_stretches`` on songs outside the held-out
+    parts (the real-music sets' tuning songs and 60 more songs with exact beats: ``python -m
+    benchmarks.analyser_mix``)."""
+    beatnet_stretches: tuple[float, ...] = (0.9, 0.93, 1.0, 1.07, 1.1)
+    """BeatNet hears the song at each of these lengths (0.9: 10 % shorter, played faster); its
+    activations, mapped back to the song's time, are averaged: the network's phase errors
+    depend on the tempo it hears and part cancel (test-time augmentation; tuned as
+    ``beatnet_weight``). ``(1.0,)`` runs it once."""
 
 
 @dataclass
@@ -318,7 +325,7 @@ def _features(y: np.ndarray, sr: int, cfg: AnalysisConfig) -> _Features:
         beat_onset = blend(unit_mean(beat_onset), act, cfg.activation_weight)
     learned = np.zeros((len(raw), 0))
     if cfg.beatnet_weight > 0.0:
-        learned = _beatnet_frames(unpadded, sr, len(raw), fps)
+        learned = _beatnet_frames(unpadded, sr, len(raw), fps, cfg.beatnet_stretches)
         act = unit_mean(learned.sum(axis=1))
         tempo_onset = blend(unit_mean(tempo_onset), act, cfg.beatnet_weight)
         beat_onset = blend(unit_mean(beat_onset), act, cfg.beatnet_weight)
@@ -342,16 +349,22 @@ def blend(envelope: Envelope, activation: Envelope, share: float) -> Envelope:
     return (1.0 - share) * envelope + share * activation
 
 
-def _beatnet_frames(y: np.ndarray, sr: int, n_frames: int, fps: float) -> np.ndarray:
+def _beatnet_frames(
+    y: np.ndarray, sr: int, n_frames: int, fps: float, stretches: Iterable[float] = (1.0,)
+) -> np.ndarray:
     """(n_frames, 2) BeatNet's P(beat), P(downbeat) at the onset frames (frame i at i / fps s),
-    interpolated from its own 50 frames/s."""
+    interpolated from its own 50 frames/s, averaged over the song heard at each of
+    ``stretches`` lengths (`AnalysisConfig.beatnet_stretches`)."""
     from quaddance.music import beatnet
 
-    probs = beatnet.beat_activation(y, sr)
-    if len(probs) == 0:
-        return np.zeros((n_frames, 2))
-    t_s, at_s = np.arange(n_frames) / fps, np.arange(len(probs)) / beatnet.FPS
-    return np.stack([np.interp(t_s, at_s, probs[:, k]) for k in range(2)], axis=1)
+    t_s = np.arange(n_frames) / fps
+    runs = []
+    for stretch in stretches:
+        probs = beatnet.beat_activation(y, sr, stretch)
+        if len(probs):
+            at_s = np.arange(len(probs)) / (beatnet.FPS * stretch)
+            runs.append(np.stack([np.interp(t_s, at_s, probs[:, k]) for k in range(2)], axis=1))
+    return np.mean(runs, axis=0) if runs else np.zeros((n_frames, 2))
 
 
 def activation_rows(y: np.ndarray, sr: int, cfg: AnalysisConfig | None = None) -> np.ndarray:

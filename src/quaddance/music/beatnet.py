@@ -1,7 +1,7 @@
-"""A learned beat and downbeat activation, BeatNet's causal CRNNs: half of both beat trackers'
-onset envelopes (`analysis.AnalysisConfig.beatnet_weight`; `BeatActivationStream` for the
-online one), and what the real-music benchmark's BeatNet tracker decodes
-(``benchmarks/bar_hmm.py``).
+"""A learned beat and downbeat activation, BeatNet's causal CRNNs: part of both beat trackers'
+onset envelopes (`analysis.AnalysisConfig.beatnet_weight`, the song heard at several speeds;
+`BeatActivationStream` and `online_beats.BEATNET_WEIGHT` for the online one), and what the
+real-music benchmark's BeatNet tracker decodes (``benchmarks/bar_hmm.py``).
 
 BeatNet (Heydari, Cwitkowitz and Duan, "BeatNet: CRNN and particle filtering for online joint
 beat downbeat and meter tracking", ISMIR 2021; https://github.com/mjhydri/BeatNet) is a small
@@ -156,15 +156,17 @@ class BeatActivation:
         return self.run(frame_features)[0]
 
 
-def beat_activation(y: np.ndarray, sr: int) -> np.ndarray:
+def beat_activation(y: np.ndarray, sr: int, stretch: float = 1.0) -> np.ndarray:
     """(n, 2) P(beat), P(downbeat) at FPS frames/s (frame i at i / FPS seconds) of mono audio.
 
-    Audio at another rate is resampled to SR_HZ first.
+    Audio at another rate is resampled to SR_HZ first. With ``stretch`` != 1 the network hears
+    the song played ``stretch`` times as long (its tempo divided by ``stretch``, its pitch
+    lowered as on a slowed record): frame i is then at i / (FPS * stretch) seconds of the song.
     """
-    if sr != SR_HZ:
+    if sr != SR_HZ or stretch != 1.0:
         import soxr
 
-        y = soxr.resample(np.asarray(y, dtype=np.float32), sr, SR_HZ, quality="HQ")
+        y = soxr.resample(np.asarray(y, dtype=np.float32), sr, SR_HZ * stretch, quality="HQ")
     return BeatActivation().run(features(y))
 
 

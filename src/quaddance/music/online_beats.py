@@ -7,7 +7,7 @@ The tracker sees the audio block by block and never looks ahead. Per 11.6 ms fra
    normalisation (running means instead of centred ones) and without its own learned
    activation: mel dB flux plus kick/bass-band flux for the tempo, mel dB flux plus treble flux
    for placing beats, each half BeatNet's causal beat activation (`music.beatnet`, its 20 ms
-   frames run as they end: `beatnet.BeatActivationStream`), as the analyser mixes it.
+   frames run as they end: `beatnet.BeatActivationStream`; ``BEATNET_WEIGHT``).
 2. Tempo, every 0.25 s: the harmonic autocorrelation salience of the last ``TEMPO_WINDOW_S`` of
    the tempo envelope (the same "lag whose multiples line up" score and log-normal prior as the
    offline analyser, which prefers the true tempo to half tempo in the dance range), followed
@@ -174,6 +174,10 @@ CUMSCORE_ALPHA = 0.9
 """Weight of the past in the cumulative beat score (BTrack's)."""
 TIGHTNESS = 5.0
 """Width of the log-Gaussian weight on beat intervals off the period (BTrack's)."""
+BEATNET_WEIGHT = 0.5
+"""Share of BeatNet's causal activation in both onset envelopes. The stream hears the song
+once, at its own speed, so the offline analyser's share (0.75 of an average over five
+speeds) is not its; an even share was chosen on the tuning songs of the real-music sets."""
 
 LOCK_BEATS = 3
 """Supported beats at a steady tempo needed for a lock ..."""
@@ -596,8 +600,8 @@ class _Onsets:
         # BeatNet's activation, normalised as the flux is: its broad humps between the beats
         # sink below the floor, its peaks stay.
         learned = self._normalise("l", spectrum.learned)
-        tempo = blend(tempo, learned, ANALYSER_CFG.beatnet_weight)
-        beat = blend(beat, learned, ANALYSER_CFG.beatnet_weight)
+        tempo = blend(tempo, learned, BEATNET_WEIGHT)
+        beat = blend(beat, learned, BEATNET_WEIGHT)
         return _Frame(
             tempo, beat, low, full, spectrum.rms, spectrum.mel_db, spectrum.learned_down
         )  # fmt: skip

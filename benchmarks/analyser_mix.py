@@ -1,0 +1,160 @@
+"""Score the offline analyser's mix of learned activations on songs outside the held-out parts.
+
+The analyser's onset envelopes take in two learned beat activations: its own
+(`AnalysisConfig.activation_weight`) and BeatNet's (`beatnet_weight`, the song heard at each of
+`beatnet_stretches`). This scores a grid of the three by the analyser's beat F (+-70 ms, at its
+metrical level and strict) and downbeat F, on the tuning songs of both real-music sets (its own
+activation is fitted on them: in-sample there) and on the tuning songs of every set given with
+``--also`` (one built as the real-music sets are, e.g. the ``benchmarks/real_music_fit`` set of
+commit f53a2e1: 60 game-music songs that no model was fitted on). Held-out songs are never
+read.
+
+    python -m benchmarks.analyser_mix [--also ROOT ...] [--out FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks.beats import beat_f_measure, metrical_level_f_measure
+from benchmarks.real_music import (
+    REAL_SET_ROOTS,
+    RealSong,
+    load_audio_at,
+    load_songs,
+    run_as_script,
+)
+from quaddance.fileio import write_json
+from quaddance.music import analysis, beatnet
+
+MODULE = "benchmarks.analyser_mix"
+RESULTS = "benchmarks/results/analyser_mix.json"
+SR_HZ = 22050
+FIVE = (0.9, 0.93, 1.0, 1.07, 1.1)
+
+
+@dataclass(frozen=True)
+class Mix:
+    activation_weight: float
+    beatnet_weight: float
+    beatnet_stretches: tuple[float, ...] = (1.0,)
+
+    @property
+    def name(self) -> str:
+        heard = "/".join(f"{s:g}" for s in self.beatnet_stretches)
+        return f"own {self.activation_weight:g}, beatnet {self.beatnet_weight:g} x {heard}"
+
+    def config(self) -> analysis.AnalysisConfig:
+        return analysis.AnalysisConfig(
+            activation_weight=self.activation_weight,
+            beatnet_weight=self.beatnet_weight,
+            beatnet_stretches=self.beatnet_stretches,
+        )
+
+
+MIXES = (
+    Mix(0.5, 0.5),
+    Mix(0.5, 0.5, FIVE),
+    Mix(0.5, 1.0),
+    Mix(0.5, 1.0, FIVE),
+    Mix(0.25, 0.5, FIVE),
+    Mix(0.25, 0.75),
+    Mix(0.25, 0.75, FIVE),
+    Mix(0.1, 0.75, FIVE),
+    Mix(0.4, 0.75, FIVE),
+    Mix(0.25, 0.65, FIVE),
+    Mix(0.25, 0.85, FIVE),
+)
+"""The grid: the shares that shipped before, BeatNet alone, and the neighbours of the default
+(own 0.25, BeatNet 0.75 heard at five speeds) in each setting."""
+
+
+def score(song: RealSong, y: np.ndarray, mix: Mix) -> dict[str, float]:
+    a = analysis.analyze(y, SR_HZ, mix.config())
+    downbeat = beat_f_measure(song.downbeats_s, a.downbeats_s) if len(song.downbeats_s) > 1 else 0.0
+    return {
+        "f_metrical": round(metrical_level_f_measure(song.beats_s, a.beats_s), 4),
+        "f": round(beat_f_measure(song.beats_s, a.beats_s), 4),
+        "downbeat_f": round(downbeat, 4),
+    }
+
+
+@contextlib.contextmanager
+def _beatnet_once_per_speed(y: np.ndarray) -> Iterator[None]:
+    """While the mixes score song ``y``, the network hears it once at each speed: the
+    analyser's calls of `beatnet.beat_activation` on it are answered from a cache (the mixes
+    share their speeds; this makes the grid about five times quicker)."""
+    network, cache = beatnet.beat_activation, {}
+
+    def cached(audio: np.ndarray, sr: int, stretch: float = 1.0) -> np.ndarray:
+        if audio is not y:
+            return network(audio, sr, stretch)
+        if (sr, stretch) not in cache:
+            cache[sr, stretch] = network(audio, sr, stretch)
+        return cache[sr, stretch]
+
+    beatnet.beat_activation = cached
+    try:
+        yield
+    finally:
+        beatnet.beat_activation = network
+
+
+def run(sets: dict[str, Path], mixes: tuple[Mix, ...]) -> dict[str, Any]:
+    """Each mix's scores per song and their means per set, tuning songs only."""
+    per_song: dict[str, dict[str, dict[str, float]]] = {m.name: {} for m in mixes}
+    members: dict[str, list[str]] = {}
+    for label, root in sets.items():
+        songs = load_songs(root, ("tuning",))
+        members[label] = [f"{label}/{s.name}" for s in songs]
+        for song in songs:
+            # float32, as the analyser reads it: the same array reaches the network
+            y = np.asarray(load_audio_at(song, SR_HZ), dtype=np.float32)
+            with _beatnet_once_per_speed(y):
+                for mix in mixes:
+                    per_song[mix.name][f"{label}/{song.name}"] = score(song, y, mix)
+            print(f"{label}/{song.name} done", flush=True)
+
+    def means(rows: list[dict[str, float]]) -> dict[str, float]:
+        return {k: round(float(np.mean([r[k] for r in rows])), 4) for k in rows[0]}
+
+    summary = {}
+    for mix in mixes:
+        songs = per_song[mix.name]
+        parts = {label: means([songs[n] for n in names]) for label, names in members.items()}
+        summary[mix.name] = {**parts, "all": means(list(songs.values()))}
+    return {"songs": members, "by_mix": summary, "per_song": per_song}
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog=f"python -m {MODULE}", description=__doc__.split("\n")[0])
+    parser.add_argument("--also", type=Path, nargs="*", default=[], help="more sets' roots")
+    parser.add_argument("--out", type=Path, default=Path(RESULTS), help="where to write JSON")
+    args = parser.parse_args(argv)
+    sets = {"tuning": REAL_SET_ROOTS["real"], "tuning-lmms": REAL_SET_ROOTS["real-lmms"]}
+    sets.update({root.name: root for root in args.also})
+    result = run(sets, MIXES)
+    write_json(
+        args.out,
+        {
+            "benchmark": "analyser_mix",
+            "command": f"python -m {MODULE}" + "".join(f" --also {root}" for root in args.also),
+            "metric": "mean over songs of the analyser's beat F (+-70 ms) at its metrical "
+            "level and strict, and its downbeat F; tuning songs only",
+            **result,
+        },
+    )
+    for name, parts in result["by_mix"].items():
+        print(name, {label: p["f_metrical"] for label, p in parts.items()})
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    run_as_script(main)

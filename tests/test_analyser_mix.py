@@ -1,0 +1,74 @@
+"""``python -m benchmarks.analyser_mix``: the grid of the analyser's activation mixes, scored on
+tuning songs only."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import benchmarks.analyser_mix as am
+from benchmarks.real_music import RealSong
+from quaddance.music.synth import render_song
+
+
+@pytest.fixture
+def two_sets(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> dict[str, np.ndarray]:
+    """Two song sets of code-made songs in place of the real-music sets; a held-out song in
+    each that must never be read."""
+    audio: dict[str, np.ndarray] = {}
+    sets: dict[Path, list[RealSong]] = {}
+    for k, (root, tempo) in enumerate(((tmp_path / "a", 100.0), (tmp_path / "b", 128.0))):
+        sets[root] = []
+        for split in ("tuning", "heldout"):
+            y, truth = render_song(tempo, 10.0, seed=k)
+            name = f"{root.name}_{split}"
+            audio[name] = y
+            sets[root].append(
+                RealSong(name, name, "A", split, "recording", root / f"{name}.ogg",
+                         truth.beats_s, truth.downbeats_s, (tempo, tempo), "4/4", "MIT", 10.0)
+            )  # fmt: skip
+
+    def load_songs(root: Path, splits: tuple[str, ...]) -> list[RealSong]:
+        return [s for s in sets[root] if s.split in splits]
+
+    def load_audio_at(song: RealSong, sr: int) -> np.ndarray:
+        assert song.split == "tuning", f"read held-out song {song.name}"
+        return audio[song.name]
+
+    roots = list(sets)
+    monkeypatch.setattr(am, "REAL_SET_ROOTS", {"real": roots[0], "real-lmms": roots[1]})
+    monkeypatch.setattr(am, "load_songs", load_songs)
+    monkeypatch.setattr(am, "load_audio_at", load_audio_at)
+    monkeypatch.setattr(am, "MIXES", (am.Mix(0.5, 0.5), am.Mix(0.25, 0.75, (0.9, 1.0))))
+    return audio
+
+
+def test_the_grid_scores_each_mix_on_the_tuning_songs_only(two_sets, tmp_path: Path) -> None:
+    out = tmp_path / "mix.json"
+    am.main(["--out", str(out)])
+    result = json.loads(out.read_text())
+    assert result["songs"] == {
+        "tuning": ["tuning/a_tuning"],
+        "tuning-lmms": ["tuning-lmms/b_tuning"],
+    }
+    names = ["own 0.5, beatnet 0.5 x 1", "own 0.25, beatnet 0.75 x 0.9/1"]
+    assert list(result["by_mix"]) == names
+    for name in names:
+        songs = result["per_song"][name]
+        # A code-made song's beats are found at either mix; "all" is the mean over the songs.
+        assert all(s["f_metrical"] > 0.8 for s in songs.values())
+        mean = np.mean([s["f_metrical"] for s in songs.values()])
+        assert result["by_mix"][name]["all"]["f_metrical"] == pytest.approx(mean, abs=1e-4)
+        assert result["by_mix"][name]["tuning"] == songs["tuning/a_tuning"]
+
+
+def test_a_mix_is_the_analysers_config() -> None:
+    cfg = am.Mix(0.25, 0.75, am.FIVE).config()
+    assert (cfg.activation_weight, cfg.beatnet_weight, cfg.beatnet_stretches) == (
+        0.25,
+        0.75,
+        am.FIVE,
+    )
