@@ -160,8 +160,9 @@ def beat_activation(y: np.ndarray, sr: int, stretch: float = 1.0) -> np.ndarray:
     """(n, 2) P(beat), P(downbeat) at FPS frames/s (frame i at i / FPS seconds) of mono audio.
 
     Audio at another rate is resampled to SR_HZ first. With ``stretch`` != 1 the network hears
-    the song played ``stretch`` times as long (its tempo divided by ``stretch``, its pitch
-    lowered as on a slowed record): frame i is then at i / (FPS * stretch) seconds of the song.
+    the song played ``stretch`` times as long (its tempo divided by ``stretch``, its pitch moved
+    with it, as a record played at another speed): frame i is then at i / (FPS * stretch)
+    seconds of the song.
     """
     if sr != SR_HZ or stretch != 1.0:
         import soxr
