@@ -27,6 +27,7 @@ from benchmarks.beats import beat_f_measure, metrical_level_f_measure
 from benchmarks.real_music import (
     REAL_SET_ROOTS,
     RealSong,
+    downbeat_f,
     load_audio_at,
     load_songs,
     run_as_script,
@@ -78,11 +79,10 @@ MIXES = (
 
 def score(song: RealSong, y: np.ndarray, mix: Mix) -> dict[str, float]:
     a = analysis.analyze(y, SR_HZ, mix.config())
-    downbeat = beat_f_measure(song.downbeats_s, a.downbeats_s) if len(song.downbeats_s) > 1 else 0.0
     return {
         "f_metrical": round(metrical_level_f_measure(song.beats_s, a.beats_s), 4),
         "f": round(beat_f_measure(song.beats_s, a.beats_s), 4),
-        "downbeat_f": round(downbeat, 4),
+        "downbeat_f": downbeat_f(song, a.downbeats_s),
     }
 
 

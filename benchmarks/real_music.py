@@ -723,7 +723,9 @@ def _scores(prefix: str, ref_s: np.ndarray, est_s: np.ndarray) -> dict[str, floa
     }
 
 
-def _downbeat_f(song: RealSong, est_s: np.ndarray, start_s: float = 0.0) -> float:
+def downbeat_f(song: RealSong, est_s: np.ndarray, start_s: float = 0.0) -> float:
+    """Downbeat F (+-70 ms, strict) of ``est_s`` against ``song``'s downbeats, both from
+    ``start_s`` on."""
     from benchmarks.beats import beat_f_measure
 
     ref = song.downbeats_s[song.downbeats_s >= start_s]
@@ -766,16 +768,16 @@ def score_song(song: RealSong, madmom: dict[str, np.ndarray] | None = None) -> d
         "duration_s": round(song.duration_s, 2),
         "n_beats": len(ref),
         **_scores("offline", ref, offline.beats_s),
-        "f_downbeat_offline": _downbeat_f(song, offline.downbeats_s),
+        "f_downbeat_offline": downbeat_f(song, offline.downbeats_s),
         "offline_beats_increasing": bool(np.all(np.diff(offline.beats_s) > 0)),
         **_scores("librosa", ref, lib_s),
         **_scores("beatnet", ref, beatnet_s),
-        "f_downbeat_beatnet": _downbeat_f(song, beatnet_down),
+        "f_downbeat_beatnet": downbeat_f(song, beatnet_down),
         "lock_s": None if lock_s is None else round(lock_s, 3),
         **_scores("online", ref[ref >= after], online_s[online_s >= after]),
         "f_metrical_online_whole": round(metrical_level_f_measure(ref, online_s), 4),
         "online_beats_increasing": bool(np.all(np.diff(online_s) > 0)),
-        "f_downbeat_online": _downbeat_f(song, online.downbeats_s, after),
+        "f_downbeat_online": downbeat_f(song, online.downbeats_s, after),
         "online_cpu_per_audio_s": round(online.tracker_s / song.duration_s, 4),
         "offline_cpu_s": round(t1 - t0, 2),
     }  # fmt: skip
@@ -784,7 +786,7 @@ def score_song(song: RealSong, madmom: dict[str, np.ndarray] | None = None) -> d
         mm_online = madmom["online"]
         row.update(_scores("madmom_online", ref[ref >= after], mm_online[mm_online >= after]))
         row["f_metrical_madmom_online_whole"] = round(metrical_level_f_measure(ref, mm_online), 4)
-        row["f_downbeat_madmom"] = _downbeat_f(song, madmom["downbeats"])
+        row["f_downbeat_madmom"] = downbeat_f(song, madmom["downbeats"])
     return row
 
 
