@@ -110,10 +110,10 @@ def _beatnet_once_per_speed(y: np.ndarray) -> Iterator[None]:
 def run(sets: dict[str, Path], mixes: tuple[Mix, ...]) -> dict[str, Any]:
     """Each mix's scores per song and their means per set, tuning songs only."""
     per_song: dict[str, dict[str, dict[str, float]]] = {m.name: {} for m in mixes}
-    members: dict[str, list[str]] = {}
-    for label, root in sets.items():
-        songs = load_songs(root, ("tuning",))
-        members[label] = [f"{label}/{s.name}" for s in songs]
+    # Every set is read first, so that a set not built stops the run before any scoring.
+    by_set = {label: load_songs(root, ("tuning",)) for label, root in sets.items()}
+    members = {label: [f"{label}/{s.name}" for s in songs] for label, songs in by_set.items()}
+    for label, songs in by_set.items():
         for song in songs:
             # float32, as the analyser reads it: the same array reaches the network
             y = np.asarray(load_audio_at(song, SR_HZ), dtype=np.float32)

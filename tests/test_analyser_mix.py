@@ -72,3 +72,24 @@ def test_a_mix_is_the_analysers_config() -> None:
         0.75,
         am.FIVE,
     )
+
+
+def test_a_set_not_built_stops_the_grid_before_any_song_is_scored(
+    two_sets, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from benchmarks import real_music
+
+    read: list[str] = []
+    listed = am.load_songs
+
+    def load_songs(root: Path, splits: tuple[str, ...]) -> list[RealSong]:
+        if root.name == "missing":
+            return real_music.load_songs(root, splits)  # the benchmark's own check
+        return listed(root, splits)
+
+    monkeypatch.setattr(am, "load_songs", load_songs)
+    monkeypatch.setattr(am, "load_audio_at", lambda song, sr: read.append(song.name))
+    with pytest.raises(real_music.SetFileMissingError, match="missing"):
+        am.main(["--also", str(tmp_path / "missing"), "--out", str(tmp_path / "mix.json")])
+    assert read == []
+    assert not (tmp_path / "mix.json").exists()
