@@ -220,6 +220,24 @@ def test_deterministic_per_seed_and_different_otherwise():
     assert not np.allclose(a, choreograph(grid, seed=5, style="energetic"))
 
 
+def test_song_fingerprint_reads_beats_to_the_millisecond():
+    """The paw and body choreographers seed with one fingerprint of the song: a beat moved
+    under half a millisecond keeps the dance's moves, one moved by a millisecond draws others."""
+    grid = synthetic_grid(118.0, 30.0, np.random.default_rng(0))
+
+    def moved(shift_s: float) -> MusicGrid:
+        beats = grid.beats_s.copy()
+        beats[10] += shift_s
+        return grid.with_beats(beats, grid.downbeats_s)
+
+    feet = plan_dance(grid, seed=5).foot
+    assert moved(0.0004).fingerprint() == grid.fingerprint()
+    np.testing.assert_array_equal(plan_dance(moved(0.0004), seed=5).foot, feet)
+    assert moved(0.0015).fingerprint() != grid.fingerprint()
+    other = plan_dance(moved(0.0015), seed=5).foot
+    assert other.shape != feet.shape or not np.array_equal(other, feet)
+
+
 def test_same_beats_other_song_other_dance():
     """Two songs with the same beats but other loudness get other moves for one seed."""
     quiet_first, loud_first = two_level_grid(True), two_level_grid(False)

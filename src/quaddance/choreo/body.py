@@ -26,7 +26,6 @@ This module must not import librosa or `quaddance.music`.
 
 from __future__ import annotations
 
-import zlib
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -225,11 +224,6 @@ def _beat_time(beats_s: np.ndarray, period_s: np.ndarray, pos: float) -> float:
     return float(beats_s[i] + (pos - i) * period_s[i])
 
 
-def _grid_fingerprint(grid: MusicGrid) -> int:
-    beats_ms = np.round(grid.beats_s * 1000.0).astype(np.int64)
-    return zlib.crc32(beats_ms.tobytes() + np.float64(grid.duration_s).tobytes())
-
-
 def plan_body(
     grid: MusicGrid, seed: int = 0, style: str = "mixed", moves: MoveSet | None = None
 ) -> list[tuple[int, BodyMove]]:
@@ -242,7 +236,7 @@ def plan_body(
     if n_beats < 2 or not vocab:
         return []
     # Its own stream: adding body moves leaves the paw dance of a seed as it was.
-    rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, _grid_fingerprint(grid), 0xB0D1])
+    rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, grid.fingerprint(), 0xB0D1])
     beat_e = grid.energy_at(beats_s)
     section = grid.section_of(beats_s)
     section_e = np.bincount(section, weights=beat_e) / np.maximum(np.bincount(section), 1)

@@ -20,7 +20,6 @@ To add a move, add one `Move` line to `MOVES` (and, for a new kind of lift, one 
 
 from __future__ import annotations
 
-import zlib
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal
 
@@ -151,13 +150,6 @@ STYLES: dict[str, dict[str, float]] = {
 }
 
 
-def _grid_fingerprint(grid: MusicGrid) -> int:
-    """A number that differs between songs, mixed into the seed: same seed, other song,
-    other dance."""
-    beats_ms = np.round(grid.beats_s * 1000.0).astype(np.int64)
-    return zlib.crc32(beats_ms.tobytes() + np.float64(grid.duration_s).tobytes())
-
-
 def _beat_time(beats_s: np.ndarray, pos: float) -> float:
     """Time of fractional beat position ``pos`` (0 = first beat), s, between beats linearly."""
     i = min(int(pos), beats_s.size - 2)
@@ -182,7 +174,7 @@ def plan_dance(
     empty = np.zeros(0)
     if n_beats < 2:
         return LiftPlan(np.zeros(0, dtype=np.int64), empty, empty, empty, empty)
-    rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, _grid_fingerprint(grid)])
+    rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, grid.fingerprint()])
 
     # Loudness that steers each choice: half the beat's own, half its section's mean, so a
     # loud section stays lively through its quieter bars.

@@ -9,6 +9,7 @@ This module must not import librosa or `quaddance.music`.
 from __future__ import annotations
 
 import dataclasses
+import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -127,6 +128,13 @@ class MusicGrid:
         """Index of the section each time in ``t_s`` falls in (0 = the first section)."""
         starts = self.sections_s[self.sections_s > 0]
         return np.searchsorted(starts, np.asarray(t_s, dtype=np.float64), side="right")
+
+    def fingerprint(self) -> int:
+        """A number that differs between songs, mixed into the choreographers' seeds: same
+        seed, other song, other dance. It reads the beats to the millisecond, so a beat
+        tracker that moves a beat by a millisecond draws another dance."""
+        beats_ms = np.round(self.beats_s * 1000.0).astype(np.int64)
+        return zlib.crc32(beats_ms.tobytes() + np.float64(self.duration_s).tobytes())
 
     @property
     def tempo_bpm(self) -> float:
