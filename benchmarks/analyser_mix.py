@@ -14,7 +14,6 @@ read.
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -23,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks import tuning_grid
 from benchmarks.beats import beat_f_measure, metrical_level_f_measure
 from benchmarks.real_music import (
     REAL_SET_ROOTS,
@@ -32,7 +32,6 @@ from benchmarks.real_music import (
     load_songs,
     run_as_script,
 )
-from quaddance.fileio import write_json
 from quaddance.music import analysis, beatnet
 
 MODULE = "benchmarks.analyser_mix"
@@ -49,8 +48,8 @@ class Mix:
 
     @property
     def name(self) -> str:
-        heard = "/".join(f"{s:g}" for s in self.beatnet_stretches)
-        return f"own {self.activation_weight:g}, beatnet {self.beatnet_weight:g} x {heard}"
+        beatnet = tuning_grid.beatnet_name(self.beatnet_weight, self.beatnet_stretches)
+        return f"own {self.activation_weight:g}, {beatnet}"
 
     def config(self) -> analysis.AnalysisConfig:
         return analysis.AnalysisConfig(
@@ -107,53 +106,35 @@ def _beatnet_once_per_speed(y: np.ndarray) -> Iterator[None]:
         beatnet.beat_activation = network
 
 
+def score_song(song: RealSong, mixes: tuple[Mix, ...]) -> dict[str, dict[str, float]]:
+    """Each mix's scores on ``song``."""
+    # float32, as the analyser reads it: the same array reaches the network
+    y = np.asarray(load_audio_at(song, SR_HZ), dtype=np.float32)
+    with _beatnet_once_per_speed(y):
+        return {mix.name: score(song, y, mix) for mix in mixes}
+
+
+def means(rows: list[dict[str, float]]) -> dict[str, float]:
+    return {k: round(float(np.mean([r[k] for r in rows])), 4) for k in rows[0]}
+
+
 def run(sets: dict[str, Path], mixes: tuple[Mix, ...]) -> dict[str, Any]:
     """Each mix's scores per song and their means per set, tuning songs only."""
-    per_song: dict[str, dict[str, dict[str, float]]] = {m.name: {} for m in mixes}
-    # Every set is read first, so that a set not built stops the run before any scoring.
-    by_set = {label: load_songs(root, ("tuning",)) for label, root in sets.items()}
-    members = {label: [f"{label}/{s.name}" for s in songs] for label, songs in by_set.items()}
-    for label, songs in by_set.items():
-        for song in songs:
-            # float32, as the analyser reads it: the same array reaches the network
-            y = np.asarray(load_audio_at(song, SR_HZ), dtype=np.float32)
-            with _beatnet_once_per_speed(y):
-                for mix in mixes:
-                    per_song[mix.name][f"{label}/{song.name}"] = score(song, y, mix)
-            print(f"{label}/{song.name} done", flush=True)
-
-    def means(rows: list[dict[str, float]]) -> dict[str, float]:
-        return {k: round(float(np.mean([r[k] for r in rows])), 4) for k in rows[0]}
-
-    summary = {}
-    for mix in mixes:
-        songs = per_song[mix.name]
-        parts = {label: means([songs[n] for n in names]) for label, names in members.items()}
-        summary[mix.name] = {**parts, "all": means(list(songs.values()))}
-    return {"songs": members, "by_mix": summary, "per_song": per_song}
+    names = [m.name for m in mixes]
+    return tuning_grid.run(sets, names, lambda s: score_song(s, mixes), means, load_songs)
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(prog=f"python -m {MODULE}", description=__doc__.split("\n")[0])
-    parser.add_argument("--also", type=Path, nargs="*", default=[], help="more sets' roots")
-    parser.add_argument("--out", type=Path, default=Path(RESULTS), help="where to write JSON")
-    args = parser.parse_args(argv)
-    sets = {"tuning": REAL_SET_ROOTS["real"], "tuning-lmms": REAL_SET_ROOTS["real-lmms"]}
-    sets.update({root.name: root for root in args.also})
-    result = run(sets, MIXES)
-    write_json(
-        args.out,
-        {
-            "benchmark": "analyser_mix",
-            "command": f"python -m {MODULE}" + "".join(f" --also {root}" for root in args.also),
-            "metric": "mean over songs of the analyser's beat F (+-70 ms) at its metrical "
-            "level and strict, and its downbeat F; tuning songs only",
-            **result,
-        },
+    tuning_grid.main(
+        argv,
+        module=MODULE,
+        doc=__doc__,
+        results=RESULTS,
+        metric="mean over songs of the analyser's beat F (+-70 ms) at its metrical "
+        "level and strict, and its downbeat F; tuning songs only",
+        roots=REAL_SET_ROOTS,
+        grid=lambda sets: run(sets, MIXES),
     )
-    for name, parts in result["by_mix"].items():
-        print(name, {label: p["f_metrical"] for label, p in parts.items()})
-    print(f"wrote {args.out}")
 
 
 if __name__ == "__main__":

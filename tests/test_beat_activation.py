@@ -274,3 +274,29 @@ def test_the_online_front_end_reads_beatnet_causally_in_any_blocks(reference) ->
     expected = np.where(j[:, None] >= 0, stream[np.maximum(j, 0)], 0.0)
     np.testing.assert_allclose(one[:, 0], expected.sum(axis=1), atol=1e-5)
     np.testing.assert_allclose(one[:, 1], expected[:, 1], atol=1e-5)
+
+
+def test_a_stream_heard_once_is_the_plain_stream(reference) -> None:
+    y = reference["audio"]
+    speeds = ba.SpeedsActivationStream((1.0,))
+    np.testing.assert_array_equal(speeds.push(y), ba.BeatActivationStream().push(y))
+    assert speeds.samples == len(y) // ba.HOP * ba.HOP
+    with pytest.raises(ValueError, match="must hold 1"):
+        ba.SpeedsActivationStream((0.9, 1.1))
+
+
+@pytest.mark.parametrize("stretch", [0.9, 1.1])
+def test_a_stream_heard_faster_or_slower_maps_back_onto_its_own_time(reference, stretch) -> None:
+    y = reference["audio"]
+    speeds = ba.SpeedsActivationStream((1.0, stretch))
+    mixed = np.concatenate([speeds.push(y[i : i + 2205]) for i in range(0, len(y), 2205)])
+    once = ba.BeatActivationStream().push(y)
+    assert mixed.shape == once.shape
+    # The mean of two: what the stretched stream gave each frame. Read back at the wrong rate,
+    # its peaks would drift off the song's by up to 25 frames over these 5 s; read right, they
+    # come with the song's or a frame or two after (the resampler's delay, the newest frame).
+    heard = (2.0 * mixed - once)[:, 0]
+    lags = np.arange(-10, 11)
+    corr = [np.corrcoef(np.roll(heard, lag)[20:-20], once[20:-20, 0])[0, 1] for lag in lags]
+    assert -2 <= lags[int(np.argmax(corr))] <= 0
+    assert max(corr) > 0.7

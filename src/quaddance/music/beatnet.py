@@ -1,7 +1,8 @@
 """A learned beat and downbeat activation, BeatNet's causal CRNNs: part of both beat trackers'
 onset envelopes (`analysis.AnalysisConfig.beatnet_weight`, the song heard at several speeds;
-`BeatActivationStream` and `online_beats.BEATNET_WEIGHT` for the online one), and what the
-real-music benchmark's BeatNet tracker decodes (``benchmarks/bar_hmm.py``).
+`SpeedsActivationStream`, `online_beats.BEATNET_WEIGHT` and ``BEATNET_STRETCHES`` (once) for
+the online one), and what the real-music benchmark's BeatNet tracker decodes
+(``benchmarks/bar_hmm.py``).
 
 BeatNet (Heydari, Cwitkowitz and Duan, "BeatNet: CRNN and particle filtering for online joint
 beat downbeat and meter tracking", ISMIR 2021; https://github.com/mjhydri/BeatNet) is a small
@@ -21,8 +22,10 @@ triangular filterbank from 30 Hz to 17 kHz, log10(1 + x) and its positive first 
 from __future__ import annotations
 
 import functools
+from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -196,3 +199,79 @@ class BeatActivationStream:
         self._audio = self._audio[m * HOP :]
         self.samples += m * HOP
         return self._net.run(feats)
+
+
+class SpeedsActivationStream:
+    """`BeatActivationStream` heard at several speeds at once, averaged: what
+    `beat_activation`'s ``stretch`` is to a whole song, for audio that arrives in blocks.
+
+    Each speed ``s`` other than 1 is a causal resampler (soxr's stream, its output aligned to
+    the input's time and about 20 ms behind it) into its own network: its frame j ends at
+    sample ``(j + 1) * HOP / s`` of the stream. Each frame of the speed-1 stream (the clock:
+    ``push`` returns its frames, as `BeatActivationStream` does) takes the mean of its own
+    probabilities and, of every other speed, those of the newest frame that has ended by then.
+    """
+
+    def __init__(self, stretches: Sequence[float] = (1.0,)) -> None:
+        if 1.0 not in stretches:
+            raise ValueError(f"stretches must hold 1 (the clock), got {tuple(stretches)}")
+        import soxr
+
+        self._clock = BeatActivationStream()
+        self._others = [
+            _Stretched(s, soxr.ResampleStream(SR_HZ, SR_HZ * s, 1, dtype="float32"))
+            for s in dict.fromkeys(stretches)
+            if s != 1.0
+        ]
+
+    @property
+    def samples(self) -> int:
+        """Samples of the stream that ended a frame so far (of the speed-1 stream)."""
+        return self._clock.samples
+
+    def push(self, samples: np.ndarray) -> np.ndarray:
+        """Add mono samples at SR_HZ; return (m, 2) P(beat), P(downbeat) of the m frames of
+        the speed-1 stream they complete, averaged over the speeds (`BeatActivationStream.push`)."""
+        samples = np.asarray(samples, np.float32)
+        start = self._clock.samples
+        probs = self._clock.push(samples)
+        if not self._others:
+            return probs
+        ends = start + HOP * np.arange(1, len(probs) + 1)
+        total, count = probs.astype(np.float64), np.ones((len(probs), 1))
+        for other in self._others:
+            got, count_one = other.push(samples, ends)
+            total += got
+            count += count_one
+        return (total / count).astype(np.float32)
+
+
+class _Stretched:
+    """One speed of `SpeedsActivationStream`: its resampler, network and the frames not yet
+    used, their end in samples of the unstretched stream."""
+
+    def __init__(self, stretch: float, resampler: Any) -> None:
+        self.stretch = stretch
+        self.resampler = resampler
+        self.net = BeatActivationStream()
+        self.ends = np.zeros(0)
+        self.probs = np.zeros((0, 2), np.float32)
+
+    def push(self, samples: np.ndarray, ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Feed ``samples``; return, for each clock frame ending at ``ends``, the probabilities
+        of this speed's newest frame ended by then (zeros before its first) and 1 where there
+        is one (else 0)."""
+        before = self.net.samples
+        probs = self.net.push(self.resampler.resample_chunk(samples))
+        frame_ends = (before + HOP * np.arange(1, len(probs) + 1)) / self.stretch
+        self.ends = np.concatenate([self.ends, frame_ends])
+        self.probs = np.vstack([self.probs, probs])
+        latest = np.searchsorted(self.ends, ends, side="right") - 1
+        has = latest >= 0
+        got = np.zeros((len(ends), 2))
+        got[has] = self.probs[latest[has]]
+        if len(ends):
+            # Frames before the newest one used are never needed again.
+            keep = max(int(latest[-1]), 0)
+            self.ends, self.probs = self.ends[keep:], self.probs[keep:]
+        return got, has[:, None].astype(np.float64)

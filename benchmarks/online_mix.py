@@ -1,0 +1,114 @@
+"""Score the online tracker's use of BeatNet on songs outside the held-out parts.
+
+The online tracker's onset envelopes take in BeatNet's causal activation
+(`online_beats.BEATNET_WEIGHT`, the stream heard at each of `online_beats.BEATNET_STRETCHES`
+speeds). This scores a grid of the two by the tracker's beat F (+-70 ms, at its metrical level
+and strict) after its first lock, its lock time and its CPU share, the tracker fed each file at
+full speed as ``bench live`` feeds it (`live.track_file`), on the tuning songs of both
+real-music sets and on those of every set given with ``--also`` (e.g. the
+``benchmarks/real_music_fit`` set of commit f53a2e1). Held-out songs are never read.
+
+    python -m benchmarks.online_mix [--also ROOT ...] [--out FILE]
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks import tuning_grid
+from benchmarks.beats import beat_f_measure, metrical_level_f_measure
+from benchmarks.real_music import REAL_SET_ROOTS, RealSong, load_songs, run_as_script
+from quaddance.music import analysis, live, online_beats
+
+MODULE = "benchmarks.online_mix"
+RESULTS = "benchmarks/results/online_mix.json"
+FIVE = analysis.AnalysisConfig().beatnet_stretches
+"""The speeds the offline analyser hears the song at."""
+THREE = (0.93, 1.0, 1.07)
+
+
+@dataclass(frozen=True)
+class Mix:
+    beatnet_weight: float
+    beatnet_stretches: tuple[float, ...] = (1.0,)
+
+    @property
+    def name(self) -> str:
+        return tuning_grid.beatnet_name(self.beatnet_weight, self.beatnet_stretches)
+
+    @contextlib.contextmanager
+    def applied(self) -> Iterator[None]:
+        """The tracker reads this mix while the block runs (its module constants)."""
+        before = online_beats.BEATNET_WEIGHT, online_beats.BEATNET_STRETCHES
+        online_beats.BEATNET_WEIGHT = self.beatnet_weight
+        online_beats.BEATNET_STRETCHES = self.beatnet_stretches
+        try:
+            yield
+        finally:
+            online_beats.BEATNET_WEIGHT, online_beats.BEATNET_STRETCHES = before
+
+
+MIXES = (
+    Mix(0.5),
+    Mix(0.75),
+    Mix(0.5, THREE),
+    Mix(0.6, THREE),
+    Mix(0.5, FIVE),
+    Mix(0.75, FIVE),
+)
+"""The grid: the default (BeatNet's share 0.5, heard once), a larger share, and the song heard
+at three and at five speeds (the offline analyser's)."""
+
+
+def score(song: RealSong, mix: Mix) -> dict[str, Any]:
+    with mix.applied():
+        track = live.track_file(song.audio_path)
+    lock_s = track.first_lock_s()
+    after = song.duration_s if lock_s is None else lock_s
+    ref, beats = song.beats_s[song.beats_s >= after], track.beats_s[track.beats_s >= after]
+    return {
+        "f_metrical": round(metrical_level_f_measure(ref, beats), 4),
+        "f": round(beat_f_measure(ref, beats), 4),
+        "lock_s": None if lock_s is None else round(lock_s, 3),
+        "cpu_per_audio_s": round(track.tracker_s / song.duration_s, 4),
+    }
+
+
+def means(rows: list[dict[str, Any]]) -> dict[str, float]:
+    out = {k: round(float(np.mean([r[k] for r in rows])), 4) for k in ("f_metrical", "f")}
+    locked = [r["lock_s"] is not None and r["lock_s"] <= 6.0 for r in rows]
+    out["lock_within_6_s"] = round(float(np.mean(locked)), 4)
+    out["cpu_per_audio_s"] = round(float(np.mean([r["cpu_per_audio_s"] for r in rows])), 4)
+    return out
+
+
+def run(sets: dict[str, Path], mixes: tuple[Mix, ...]) -> dict[str, Any]:
+    """Each mix's scores per song and their means per set, tuning songs only."""
+    names = [m.name for m in mixes]
+    return tuning_grid.run(
+        sets, names, lambda song: {m.name: score(song, m) for m in mixes}, means, load_songs
+    )
+
+
+def main(argv: list[str] | None = None) -> None:
+    tuning_grid.main(
+        argv,
+        module=MODULE,
+        doc=__doc__,
+        results=RESULTS,
+        metric="mean over songs of the online tracker's beat F (+-70 ms) at its metrical "
+        "level and strict after its first lock, the share of songs locked within 6 s and "
+        "its CPU time per second of audio; tuning songs only",
+        roots=REAL_SET_ROOTS,
+        grid=lambda sets: run(sets, MIXES),
+    )
+
+
+if __name__ == "__main__":
+    run_as_script(main)

@@ -1,0 +1,82 @@
+"""A grid of a beat tracker's settings, scored song by song on the tuning songs of the
+real-music sets and of every set given with ``--also``, never on held-out ones: what
+``benchmarks.analyser_mix`` (the offline analyser) and ``benchmarks.online_mix`` (the online
+tracker) share."""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from benchmarks.real_music import RealSong
+from quaddance.fileio import write_json
+
+Row = dict[str, Any]
+
+
+def beatnet_name(weight: float, stretches: tuple[float, ...]) -> str:
+    """How the grids name BeatNet's share and the speeds the song is heard at:
+    ``beatnet 0.75 x 0.9/1``."""
+    return f"beatnet {weight:g} x " + "/".join(f"{s:g}" for s in stretches)
+
+
+def run(
+    sets: dict[str, Path],
+    mixes: list[str],
+    score_song: Callable[[RealSong], dict[str, Row]],
+    means: Callable[[list[Row]], dict[str, float]],
+    load_songs: Callable[[Path, tuple[str, ...]], list[RealSong]],
+) -> dict[str, Any]:
+    """Each mix's scores per song (``score_song``: mix name -> row, for one song) and their
+    ``means`` per set and over all songs; tuning songs only."""
+    per_song: dict[str, dict[str, Row]] = {m: {} for m in mixes}
+    # Every set is read first, so that a set not built stops the run before any scoring.
+    by_set = {label: load_songs(root, ("tuning",)) for label, root in sets.items()}
+    members = {label: [f"{label}/{s.name}" for s in songs] for label, songs in by_set.items()}
+    for label, songs in by_set.items():
+        for song in songs:
+            for mix, row in score_song(song).items():
+                per_song[mix][f"{label}/{song.name}"] = row
+            print(f"{label}/{song.name} done", flush=True)
+    summary = {}
+    for mix in mixes:
+        songs = per_song[mix]
+        parts = {label: means([songs[n] for n in names]) for label, names in members.items()}
+        summary[mix] = {**parts, "all": means(list(songs.values()))}
+    return {"songs": members, "by_mix": summary, "per_song": per_song}
+
+
+def main(
+    argv: list[str] | None,
+    *,
+    module: str,
+    doc: str,
+    results: str,
+    metric: str,
+    roots: dict[str, Path],
+    grid: Callable[[dict[str, Path]], dict[str, Any]],
+) -> None:
+    """Parse ``--also`` and ``--out``, score the ``grid`` over the tuning songs of the two
+    real-music sets (``roots``: `real_music.REAL_SET_ROOTS`) and of each ``--also`` set, write
+    the JSON (atomically) and print each mix's F at the metrical level per set."""
+    parser = argparse.ArgumentParser(prog=f"python -m {module}", description=doc.split("\n")[0])
+    parser.add_argument("--also", type=Path, nargs="*", default=[], help="more sets' roots")
+    parser.add_argument("--out", type=Path, default=Path(results), help="where to write JSON")
+    args = parser.parse_args(argv)
+    sets = {"tuning": roots["real"], "tuning-lmms": roots["real-lmms"]}
+    sets.update({root.name: root for root in args.also})
+    result = grid(sets)
+    write_json(
+        args.out,
+        {
+            "benchmark": module.rsplit(".", 1)[-1],
+            "command": f"python -m {module}" + "".join(f" --also {root}" for root in args.also),
+            "metric": metric,
+            **result,
+        },
+    )
+    for name, parts in result["by_mix"].items():
+        print(name, {label: p["f_metrical"] for label, p in parts.items()})
+    print(f"wrote {args.out}")

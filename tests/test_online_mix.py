@@ -1,0 +1,94 @@
+"""``python -m benchmarks.online_mix``: the grid of the online tracker's uses of BeatNet, scored
+on tuning songs only."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import benchmarks.online_mix as om
+from benchmarks.real_music import RealSong
+from quaddance.music import online_beats
+from quaddance.music.synth import render_song
+
+
+@pytest.fixture
+def two_sets(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> list[tuple[str, tuple]]:
+    """Two song sets of code-made songs in place of the real-music sets, each with a held-out
+    song that must never be read; returns what the tracker read: (song, its mix)."""
+    import soundfile as sf
+
+    sets: dict[Path, list[RealSong]] = {}
+    for k, (root, tempo) in enumerate(((tmp_path / "a", 100.0), (tmp_path / "b", 128.0))):
+        root.mkdir()
+        sets[root] = []
+        for split in ("tuning", "heldout"):
+            y, truth = render_song(tempo, 12.0, seed=k)
+            name = f"{root.name}_{split}"
+            sf.write(root / f"{name}.wav", y, 22050)
+            sets[root].append(
+                RealSong(name, name, "A", split, "recording", root / f"{name}.wav",
+                         truth.beats_s, truth.downbeats_s, (tempo, tempo), "4/4", "MIT", 12.0)
+            )  # fmt: skip
+
+    def load_songs(root: Path, splits: tuple[str, ...]) -> list[RealSong]:
+        return [s for s in sets[root] if s.split in splits]
+
+    read: list[tuple[str, tuple]] = []
+    track_file = om.live.track_file
+
+    def tracked(path: Path):  # what the tracker reads, and with which mix
+        assert "heldout" not in Path(path).name, f"read held-out song {path}"
+        read.append(
+            (Path(path).stem, (online_beats.BEATNET_WEIGHT, online_beats.BEATNET_STRETCHES))
+        )
+        return track_file(path)
+
+    roots = list(sets)
+    monkeypatch.setattr(om, "REAL_SET_ROOTS", {"real": roots[0], "real-lmms": roots[1]})
+    monkeypatch.setattr(om, "load_songs", load_songs)
+    monkeypatch.setattr(om.live, "track_file", tracked)
+    monkeypatch.setattr(om, "MIXES", (om.Mix(0.5), om.Mix(0.75, (0.9, 1.0))))
+    return read
+
+
+def test_the_grid_scores_each_mix_on_the_tuning_songs_only(two_sets, tmp_path: Path) -> None:
+    out = tmp_path / "mix.json"
+    om.main(["--out", str(out)])
+    result = json.loads(out.read_text())
+    assert result["songs"] == {
+        "tuning": ["tuning/a_tuning"],
+        "tuning-lmms": ["tuning-lmms/b_tuning"],
+    }
+    # Each song was tracked once per mix, the tracker reading that mix; then the defaults.
+    assert two_sets == [
+        ("a_tuning", (0.5, (1.0,))), ("a_tuning", (0.75, (0.9, 1.0))),
+        ("b_tuning", (0.5, (1.0,))), ("b_tuning", (0.75, (0.9, 1.0))),
+    ]  # fmt: skip
+    assert (online_beats.BEATNET_WEIGHT, online_beats.BEATNET_STRETCHES) == (0.5, (1.0,))
+    names = ["beatnet 0.5 x 1", "beatnet 0.75 x 0.9/1"]
+    assert list(result["by_mix"]) == names
+    for name in names:
+        songs = result["per_song"][name]
+        # A code-made song's beats are found at either mix, soon after its start.
+        assert all(s["f_metrical"] > 0.8 and s["lock_s"] < 6.0 for s in songs.values())
+        mean = np.mean([s["f_metrical"] for s in songs.values()])
+        assert result["by_mix"][name]["all"]["f_metrical"] == pytest.approx(mean, abs=1e-4)
+        assert result["by_mix"][name]["all"]["lock_within_6_s"] == 1.0
+        assert result["by_mix"][name]["tuning"]["f"] == songs["tuning/a_tuning"]["f"]
+
+
+def test_a_mix_is_restored_when_its_song_fails(monkeypatch: pytest.MonkeyPatch) -> None:
+    def broken(path: Path):
+        assert online_beats.BEATNET_STRETCHES == om.FIVE
+        raise RuntimeError("unreadable")
+
+    monkeypatch.setattr(om.live, "track_file", broken)
+    song = RealSong("x", "x", "A", "tuning", "recording", Path("x.wav"), np.zeros(0),
+                    np.zeros(0), (120.0, 120.0), "4/4", "MIT", 1.0)  # fmt: skip
+    with pytest.raises(RuntimeError, match="unreadable"):
+        om.score(song, om.Mix(0.75, om.FIVE))
+    assert (online_beats.BEATNET_WEIGHT, online_beats.BEATNET_STRETCHES) == (0.5, (1.0,))
