@@ -8,42 +8,27 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from tuning_sets import code_made_sets
 
 import benchmarks.analyser_mix as am
 from benchmarks.real_music import RealSong
-from quaddance.music.synth import render_song
 
 
 @pytest.fixture
 def two_sets(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> dict[str, np.ndarray]:
     """Two song sets of code-made songs in place of the real-music sets; a held-out song in
     each that must never be read."""
-    audio: dict[str, np.ndarray] = {}
-    sets: dict[Path, list[RealSong]] = {}
-    for k, (root, tempo) in enumerate(((tmp_path / "a", 100.0), (tmp_path / "b", 128.0))):
-        sets[root] = []
-        for split in ("tuning", "heldout"):
-            y, truth = render_song(tempo, 10.0, seed=k)
-            name = f"{root.name}_{split}"
-            audio[name] = y
-            sets[root].append(
-                RealSong(name, name, "A", split, "recording", root / f"{name}.ogg",
-                         truth.beats_s, truth.downbeats_s, (tempo, tempo), "4/4", "MIT", 10.0)
-            )  # fmt: skip
-
-    def load_songs(root: Path, splits: tuple[str, ...]) -> list[RealSong]:
-        return [s for s in sets[root] if s.split in splits]
+    made = code_made_sets(tmp_path, 10.0)
 
     def load_audio_at(song: RealSong, sr: int) -> np.ndarray:
         assert song.split == "tuning", f"read held-out song {song.name}"
-        return audio[song.name]
+        return made.audio[song.name]
 
-    roots = list(sets)
-    monkeypatch.setattr(am, "REAL_SET_ROOTS", {"real": roots[0], "real-lmms": roots[1]})
-    monkeypatch.setattr(am, "load_songs", load_songs)
+    monkeypatch.setattr(am, "REAL_SET_ROOTS", made.roots)
+    monkeypatch.setattr(am, "load_songs", made.load_songs)
     monkeypatch.setattr(am, "load_audio_at", load_audio_at)
     monkeypatch.setattr(am, "MIXES", (am.Mix(0.5, 0.5), am.Mix(0.25, 0.75, (0.9, 1.0))))
-    return audio
+    return made.audio
 
 
 def test_the_grid_scores_each_mix_on_the_tuning_songs_only(two_sets, tmp_path: Path) -> None:

@@ -8,48 +8,29 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from tuning_sets import code_made_sets
 
 import benchmarks.online_mix as om
 from benchmarks.real_music import RealSong
 from quaddance.music import online_beats
-from quaddance.music.synth import render_song
 
 
 @pytest.fixture
 def two_sets(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> list[tuple[str, tuple]]:
     """Two song sets of code-made songs in place of the real-music sets, each with a held-out
     song that must never be read; returns what the tracker read: (song, its mix)."""
-    import soundfile as sf
-
-    sets: dict[Path, list[RealSong]] = {}
-    for k, (root, tempo) in enumerate(((tmp_path / "a", 100.0), (tmp_path / "b", 128.0))):
-        root.mkdir()
-        sets[root] = []
-        for split in ("tuning", "heldout"):
-            y, truth = render_song(tempo, 12.0, seed=k)
-            name = f"{root.name}_{split}"
-            sf.write(root / f"{name}.wav", y, 22050)
-            sets[root].append(
-                RealSong(name, name, "A", split, "recording", root / f"{name}.wav",
-                         truth.beats_s, truth.downbeats_s, (tempo, tempo), "4/4", "MIT", 12.0)
-            )  # fmt: skip
-
-    def load_songs(root: Path, splits: tuple[str, ...]) -> list[RealSong]:
-        return [s for s in sets[root] if s.split in splits]
-
+    made = code_made_sets(tmp_path, 12.0, write_wav=True)
     read: list[tuple[str, tuple]] = []
     track_file = om.live.track_file
 
     def tracked(path: Path):  # what the tracker reads, and with which mix
         assert "heldout" not in Path(path).name, f"read held-out song {path}"
-        read.append(
-            (Path(path).stem, (online_beats.BEATNET_WEIGHT, online_beats.BEATNET_STRETCHES))
-        )
+        mix = (online_beats.BEATNET_WEIGHT, online_beats.BEATNET_STRETCHES)
+        read.append((Path(path).stem, mix))
         return track_file(path)
 
-    roots = list(sets)
-    monkeypatch.setattr(om, "REAL_SET_ROOTS", {"real": roots[0], "real-lmms": roots[1]})
-    monkeypatch.setattr(om, "load_songs", load_songs)
+    monkeypatch.setattr(om, "REAL_SET_ROOTS", made.roots)
+    monkeypatch.setattr(om, "load_songs", made.load_songs)
     monkeypatch.setattr(om.live, "track_file", tracked)
     monkeypatch.setattr(om, "MIXES", (om.Mix(0.5), om.Mix(0.75, (0.9, 1.0))))
     return read
