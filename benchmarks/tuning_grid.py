@@ -24,14 +24,14 @@ def beatnet_name(weight: float, stretches: tuple[float, ...]) -> str:
 
 def run(
     sets: dict[str, Path],
-    mixes: list[str],
+    mix_names: list[str],
     score_song: Callable[[RealSong], dict[str, Row]],
     means: Callable[[list[Row]], dict[str, float]],
     load_songs: Callable[[Path, tuple[str, ...]], list[RealSong]],
 ) -> dict[str, Any]:
     """Each mix's scores per song (``score_song``: mix name -> row, for one song) and their
     ``means`` per set and over all songs; tuning songs only."""
-    per_song: dict[str, dict[str, Row]] = {m: {} for m in mixes}
+    per_song: dict[str, dict[str, Row]] = {m: {} for m in mix_names}
     # Every set is read first, so that a set not built stops the run before any scoring.
     by_set = {label: load_songs(root, ("tuning",)) for label, root in sets.items()}
     members = {label: [f"{label}/{s.name}" for s in songs] for label, songs in by_set.items()}
@@ -41,7 +41,7 @@ def run(
                 per_song[mix][f"{label}/{song.name}"] = row
             print(f"{label}/{song.name} done", flush=True)
     summary = {}
-    for mix in mixes:
+    for mix in mix_names:
         songs = per_song[mix]
         parts = {label: means([songs[n] for n in names]) for label, names in members.items()}
         summary[mix] = {**parts, "all": means(list(songs.values()))}
