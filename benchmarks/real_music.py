@@ -560,6 +560,19 @@ def _build_lmms_render(src: SongSource, package_dir: Path, root: Path) -> dict[s
     return entry
 
 
+def _check_sources_present(songs: tuple[SongSource, ...], unpacked: Path, root: Path) -> None:
+    """Every song's folder or file is in its unpacked package, checked before the first song is
+    rendered (minutes each): a path from another package version, or of a kind this builder
+    does not read (a lump inside a WAD file), is named with the sources file that lists it."""
+    missing = [s for s in songs if not (unpacked / s.package / s.path).exists()]
+    if missing:
+        listed = ", ".join(f"{s.name} ({s.path} in {s.package})" for s in missing[:3])
+        more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
+        raise SetFileMissingError(
+            f"{root / SOURCES_NAME}: not in the unpacked Debian package: {listed}{more}"
+        )
+
+
 def build(root: Path = ROOT, debs: dict[str, Path] | None = None) -> dict[str, Any]:
     """Download the Debian packages (unless ``debs`` gives their .deb files), write the audio,
     beat files and manifest under ``root``."""
@@ -575,6 +588,7 @@ def build(root: Path = ROOT, debs: dict[str, Path] | None = None) -> dict[str, A
             subprocess.run(
                 ["dpkg-deb", "-x", str(debs[package]), str(tmp_dir / package)], check=True
             )
+        _check_sources_present(songs, tmp_dir, root)
         builders = {"recording": _build_recording, "midi_render": _build_midi_render,
                     "lmms_render": _build_lmms_render}  # fmt: skip
         for i, src in enumerate(songs, 1):

@@ -252,3 +252,40 @@ def test_a_set_not_built_is_one_line_and_exit_2_from_the_scripts(
     monkeypatch.chdir(tmp_path)
     with pytest.raises(FileNotFoundError, match="apt-get install lmms"):
         load_manifest(Path("lmms"))
+
+
+def test_build_names_a_source_missing_from_its_package_before_rendering(tmp_path: Path) -> None:
+    import shutil
+    import subprocess
+
+    import benchmarks.real_music as real_music
+
+    if shutil.which("dpkg-deb") is None:
+        pytest.skip("dpkg-deb is not installed (not a Debian system)")
+    pkg = tmp_path / "pkg"
+    (pkg / "DEBIAN").mkdir(parents=True)
+    (pkg / "DEBIAN" / "control").write_text(
+        "Package: tiny-songs\nVersion: 1.0\nArchitecture: all\n"
+        "Maintainer: nobody <nobody@example.com>\nDescription: test\n"
+    )
+    (pkg / "usr/share/songs").mkdir(parents=True)
+    (pkg / "usr/share/songs/there.mid").write_bytes(b"MThd")
+    deb = tmp_path / "tiny-songs_1.0_all.deb"
+    subprocess.run(["dpkg-deb", "--build", str(pkg), str(deb)], check=True, capture_output=True)
+    root = tmp_path / "set"
+    root.mkdir()
+    song = (
+        '[[song]]\nname = "{name}"\npackage = "tiny-songs"\npath = "{path}"\ntitle = "t"\n'
+        'artist = "a"\nlicence = "GPL-2.0"\nsplit = "tuning"\nnotes = ""\n'
+    )
+    (root / "sources.toml").write_text(
+        'description = "d"\nsplit_reason = "r"\n'
+        + song.format(name="here", path="usr/share/songs/there.mid")
+        + song.format(name="gone", path="usr/share/doom/freedoom1.wad:D_E1M1")
+    )
+    with pytest.raises(real_music.SetFileMissingError) as err:
+        real_music.build(root, debs={"tiny-songs": deb})
+    msg = str(err.value)
+    assert str(root / "sources.toml") in msg and "gone (usr/share/doom/freedoom1.wad:D_E1M1" in msg
+    assert "here" not in msg.split(": ", 1)[1]  # the song that is there is not named
+    assert not (root / "manifest.json").exists() and not (root / "audio").exists()
