@@ -31,6 +31,9 @@ Commands (run from the repository root):
   splits and writes ``benchmarks/results/beats_real.json``; ``--report`` also writes the
   markdown report (`report_md`, ``docs/results/beats_real.md``); ``python -m
   benchmarks.real_music report`` writes it from a results file.
+- ``python -m benchmarks.real_music compare --root A --other B`` compares two builds of a set,
+  song by song (`compare_builds`): the LMMS part is rendered by LMMS with
+  ``lmms_repeatable.c`` loaded, so that two builds hold the same audio.
 
 The split (``real_music/sources.toml``) was fixed before any tracker was run on these songs: the
 ``tuning`` part may be used to choose settings, the ``heldout`` part only to report them.
@@ -337,11 +340,37 @@ def read_lmms_tempo_map(project: Path) -> TempoMap:
     return TempoMap(LMMS_TICKS_PER_BEAT, (0,), (float(head.get("bpm")),), per_bar)
 
 
-LMMS_INSTALL_HINT = "apt-get install lmms"
+LMMS_INSTALL_HINT = "apt-get install lmms gcc"
+"""What a machine needs to build the LMMS part: LMMS, and a C compiler for `REPEATABLE_SHIM`."""
+C_COMPILER_HINT = "apt-get install gcc"
+REPEATABLE_SHIM = Path(__file__).resolve().parent / "lmms_repeatable.c"
+"""Loaded into LMMS as it renders (``LD_PRELOAD``): a fixed random seed and one mixing thread,
+so that two builds of the set render the same audio (with several threads they do not)."""
+REPEATABLE_RENDERER = "one mixing thread, random seed fixed (benchmarks/lmms_repeatable.c)"
+"""How the set's renders were made, written after LMMS's version in the manifest."""
+
+
+def compile_repeatable_shim(out_dir: Path) -> Path:
+    """Compile `REPEATABLE_SHIM` into ``out_dir``; returns the shared library's path."""
+    import shutil
+
+    cc = shutil.which("cc") or shutil.which("gcc")
+    if cc is None:
+        raise FileNotFoundError(
+            f"no C compiler: LMMS renders repeatably with {REPEATABLE_SHIM.name} compiled "
+            f"({C_COMPILER_HINT})"
+        )
+    lib = out_dir / "lmms_repeatable.so"
+    cmd = [cc, "-shared", "-fPIC", "-O2", "-o", str(lib), str(REPEATABLE_SHIM), "-ldl"]
+    done = subprocess.run(cmd, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise RuntimeError(f"{REPEATABLE_SHIM}: {cc} failed: {done.stderr.strip()[-300:]}")
+    return lib
 
 
 def render_lmms(project: Path, wav: Path, timeout_s: float = 600.0) -> None:
-    """Render an LMMS project to a wav file with LMMS itself, with no display."""
+    """Render an LMMS project to a wav file with LMMS itself, with no display, repeatably
+    (`REPEATABLE_SHIM`)."""
     import os
     import shutil
 
@@ -351,8 +380,11 @@ def render_lmms(project: Path, wav: Path, timeout_s: float = 600.0) -> None:
     # LMMS refuses root unless told; a build in a container runs as root.
     root_flag = ["--allowroot"] if os.geteuid() == 0 else []
     cmd = [lmms, *root_flag, "render", str(project), "-o", str(wav), "-f", "wav"]
-    env = {**os.environ, "QT_QPA_PLATFORM": "offscreen"}
-    done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=timeout_s)
+    with tempfile.TemporaryDirectory(prefix="quaddance-shim-") as tmp:
+        preload = " ".join(filter(None, [str(compile_repeatable_shim(Path(tmp))),
+                                         os.environ.get("LD_PRELOAD")]))  # fmt: skip
+        env = {**os.environ, "QT_QPA_PLATFORM": "offscreen", "LD_PRELOAD": preload}
+        done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=timeout_s)
     if done.returncode != 0 or not wav.is_file():
         raise RuntimeError(f"{project}: lmms render failed: {done.stderr.strip()[-300:]}")
 
@@ -551,7 +583,7 @@ def _build_lmms_render(src: SongSource, package_dir: Path, root: Path) -> dict[s
         tempo_map.beat_times_s(len(y) / AUDIO_SR_HZ), y, tempo_map
     )
     entry = _write_song(src, y, beats_s, downbeats_s, tempo_map, root)
-    entry["source"] = {"paths": [src.path], "renderer": _lmms_version()}
+    entry["source"] = {"paths": [src.path], "renderer": f"{_lmms_version()}, {REPEATABLE_RENDERER}"}
     entry["annotation"] = (
         "the project's tempo and meter: a beat every quarter note from tick 0 (exact: the "
         "audio is rendered from the same project); downbeats every bar; beats over the "
@@ -1026,6 +1058,42 @@ def report_md(results: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def compare_builds(root: Path, other: Path) -> dict[str, Any]:
+    """Two builds of one set, song by song: is the audio the same (sample for sample, else how
+    close: the correlation of the mono waveforms over the whole song and over its last 30 s,
+    where renders that drift apart differ most, and the largest difference), and the beats?"""
+    import soundfile as sf
+
+    a_songs, b_songs = ({s.name: s for s in load_songs(r)} for r in (root, other))
+    rows = []
+    for name in sorted(a_songs.keys() & b_songs.keys()):
+        (ya, sr_a), (yb, sr_b) = (
+            sf.read(s.audio_path, dtype="float32", always_2d=True)
+            for s in (a_songs[name], b_songs[name])
+        )
+        n = min(len(ya), len(yb))
+        x, y = ya[:n].mean(axis=1), yb[:n].mean(axis=1)
+        tail = max(0, n - 30 * sr_a)
+        rows.append({
+            "name": name,
+            "same_length": len(ya) == len(yb) and sr_a == sr_b,
+            "identical": len(ya) == len(yb) and bool(np.array_equal(ya, yb)),
+            "correlation": round(_correlation(x, y), 6),
+            "correlation_last_30s": round(_correlation(x[tail:], y[tail:]), 6),
+            "max_abs_diff": round(float(np.abs(x - y).max()) if n else 0.0, 6),
+            "beats_equal": bool(np.array_equal(a_songs[name].beats_s, b_songs[name].beats_s)),
+        })  # fmt: skip
+    only = sorted(a_songs.keys() ^ b_songs.keys())
+    return {"roots": [str(root), str(other)], "songs": rows, "in_one_build_only": only}
+
+
+def _correlation(x: np.ndarray, y: np.ndarray) -> float:
+    """Pearson correlation; 1 for two equal constant signals, 0 for unequal ones."""
+    if len(x) == 0 or x.std() == 0.0 or y.std() == 0.0:
+        return float(np.array_equal(x, y))
+    return float(np.corrcoef(x, y)[0, 1])
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog=f"python -m {MODULE}", description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -1037,10 +1105,13 @@ def main(argv: list[str] | None = None) -> None:
     r = sub.add_parser("bench", help="score the trackers on both splits")
     r.add_argument("--out", type=Path, default=Path("benchmarks/results/beats_real.json"))
     r.add_argument("--madmom-python", default=None, help="an interpreter that imports madmom")
+    k = sub.add_parser("compare", help="compare the audio and beats of two builds of a set")
+    k.add_argument("--other", type=Path, required=True, help="the other build's folder")
+    k.add_argument("--out", type=Path, default=None, help="write the comparison here (JSON)")
     m = sub.add_parser("report", help="the markdown report of a results file")
     m.add_argument("--results", type=Path, default=Path("benchmarks/results/beats_real.json"))
     m.add_argument("--out", type=Path, default=Path("docs/results/beats_real.md"))
-    for p in (b, c, r):
+    for p in (b, c, r, k):
         sets = f"{_rel(ROOT)} or {_rel(LMMS_ROOT)}"
         p.add_argument("--root", type=Path, default=ROOT,
                        help=f"the set's folder (its sources.toml): {sets}")  # fmt: skip
@@ -1051,6 +1122,17 @@ def main(argv: list[str] | None = None) -> None:
         with atomic_path(args.out) as tmp:
             tmp.write_text(report_md(json.loads(args.results.read_text())))
         print(f"-> {args.out}")
+        return
+    if args.command == "compare":
+        from quaddance.fileio import write_json
+
+        compared = compare_builds(args.root, args.other)
+        compared["command"] = f"python -m {MODULE} compare --root {args.root} --other {args.other}"
+        if args.out is not None:
+            write_json(args.out, compared)
+        for row in compared["songs"]:
+            print(row["name"], "identical" if row["identical"] else row["correlation"],
+                  row["correlation_last_30s"], row["max_abs_diff"], row["beats_equal"])  # fmt: skip
         return
     if args.command == "build":
         debs = None

@@ -1,7 +1,7 @@
 """Fit the analyser's learned beat activation (`quaddance.music.beat_activation`).
 
 It is fitted on the ``tuning`` songs of both real-music sets (``benchmarks/real_music`` and
-``benchmarks/real_music_lmms``; build the second with ``apt-get install lmms; python -m
+``benchmarks/real_music_lmms``; build the second with ``apt-get install lmms gcc; python -m
 benchmarks.real_music build --root benchmarks/real_music_lmms``), never on the held-out ones.
 Each onset frame within one frame (23 ms) of a beat is a positive example, every other frame a
 negative one, the two classes weighted equally (scikit-learn's logistic regression).

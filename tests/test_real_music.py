@@ -152,6 +152,78 @@ def test_lmms_render_without_lmms_names_the_install(monkeypatch, tmp_path: Path)
         render_lmms(tmp_path / "a.mmpz", tmp_path / "a.wav")
 
 
+def _c_compiler() -> str:
+    import shutil
+
+    cc = shutil.which("cc") or shutil.which("gcc")
+    if cc is None:
+        pytest.skip("no C compiler here (apt-get install gcc)")
+    return cc
+
+
+def test_lmms_shim_fixes_the_seed_and_reports_one_cpu(tmp_path: Path) -> None:
+    import os
+    import subprocess
+    import sys
+
+    from benchmarks.real_music import compile_repeatable_shim
+
+    _c_compiler()
+    lib = compile_repeatable_shim(tmp_path)
+    # A process that seeds rand() as LMMS does (from the clock and its pid), then draws.
+    child = (
+        "import ctypes, os, sys, time; c = ctypes.CDLL(None); "
+        "c.srand(int(time.time() * 1e6) + os.getpid() + int(sys.argv[1])); "
+        "print([c.rand() for _ in range(4)], os.sysconf('SC_NPROCESSORS_ONLN'))"
+    )
+
+    def run(seed_offset: int, preload: bool) -> str:
+        env = {**os.environ, "LD_PRELOAD": str(lib)} if preload else dict(os.environ)
+        cmd = [sys.executable, "-c", child, str(seed_offset)]
+        return subprocess.run(cmd, env=env, capture_output=True, text=True, check=True).stdout
+
+    first, second = run(1, preload=True), run(2, preload=True)
+    assert first == second and first.split("]")[1].strip() == "1"
+    assert run(1, preload=False) != run(2, preload=False)
+
+
+def test_lmms_render_preloads_the_shim_and_keeps_the_users_preload(
+    monkeypatch, tmp_path: Path
+) -> None:
+    import os
+
+    from benchmarks.real_music import render_lmms
+
+    _c_compiler()
+    fake = tmp_path / "bin" / "lmms"
+    fake.parent.mkdir()
+    # A stand-in LMMS: writes its LD_PRELOAD and an (empty) file where -o says.
+    fake.write_text(
+        '#!/bin/sh\nwhile [ "$1" != "-o" ]; do shift; done\n'
+        f'echo "$LD_PRELOAD" > {tmp_path / "preload.txt"}\n: > "$2"\n'
+    )
+    fake.chmod(0o755)
+    monkeypatch.setenv("PATH", f"{fake.parent}:{os.environ['PATH']}")
+    monkeypatch.setenv("LD_PRELOAD", "")
+    render_lmms(tmp_path / "a.mmpz", tmp_path / "a.wav")
+    first = (tmp_path / "preload.txt").read_text().split()
+    assert len(first) == 1 and first[0].endswith("lmms_repeatable.so")
+    monkeypatch.setenv("LD_PRELOAD", "libmine.so")
+    render_lmms(tmp_path / "a.mmpz", tmp_path / "b.wav")
+    second = (tmp_path / "preload.txt").read_text().split()
+    assert second[1:] == ["libmine.so"] and second[0].endswith("lmms_repeatable.so")
+
+
+def test_lmms_shim_without_a_compiler_names_the_install(monkeypatch, tmp_path: Path) -> None:
+    import shutil
+
+    from benchmarks.real_music import C_COMPILER_HINT, compile_repeatable_shim
+
+    monkeypatch.setattr(shutil, "which", lambda name: None)
+    with pytest.raises(FileNotFoundError, match=C_COMPILER_HINT):
+        compile_repeatable_shim(tmp_path)
+
+
 def test_lmms_sources_are_split_by_artist_and_licensed() -> None:
     from benchmarks.real_music import LMMS_ROOT
 
@@ -182,23 +254,61 @@ def test_lmms_song_kind_from_its_project_file() -> None:
     assert kind("a/b.mid") == "midi_render" and kind("a/song") == "recording"
 
 
+def _tiny_set(root: Path, audio: dict[str, np.ndarray], beats_s=(0.1, 0.6)) -> Path:
+    """A built set under ``root``: one held-out song per ``audio`` entry (mono, 22.05 kHz)."""
+    import json
+
+    (root / "beats").mkdir(parents=True)
+    (root / "L.md").write_text("licence")
+    entries = []
+    for name, y in audio.items():
+        sf.write(str(root / f"{name}.wav"), y, 22050)
+        np.savetxt(root / f"beats/{name}.beats", beats_s)
+        np.savetxt(root / f"beats/{name}.downbeats", beats_s[:1])
+        entries.append(
+            {"name": name, "split": "heldout", "kind": "lmms_render", "title": "A", "artist": "B",
+             "audio": f"{name}.wav", "beats": f"beats/{name}.beats",
+             "downbeats": f"beats/{name}.downbeats", "licence_file": "L.md", "licence": "MIT",
+             "duration_s": len(y) / 22050, "tempo_bpm": [120, 120], "meter": "4/4"}
+        )  # fmt: skip
+    manifest = {"description": "Songs of a test", "songs": entries}
+    (root / "manifest.json").write_text(json.dumps(manifest))
+    return root
+
+
+def test_compare_builds_tells_the_same_audio_from_drifting_audio(tmp_path: Path) -> None:
+    import json
+
+    from benchmarks.real_music import compare_builds, main
+
+    rng = np.random.default_rng(0)
+    y = (0.1 * rng.standard_normal(45 * 22050)).astype(np.float32)
+    drift = y.copy()
+    drift[-15 * 22050 :] = 0.1 * rng.standard_normal(15 * 22050)  # the last 15 s differ
+    a = _tiny_set(tmp_path / "a", {"same": y, "drift": y, "only_a": y})
+    b = _tiny_set(tmp_path / "b", {"same": y, "drift": drift}, beats_s=(0.1, 0.7))
+    out = compare_builds(a, b)
+    rows = {r["name"]: r for r in out["songs"]}
+    assert out["in_one_build_only"] == ["only_a"] and set(rows) == {"same", "drift"}
+    assert rows["same"]["identical"] and rows["same"]["correlation"] == 1.0
+    drifted = rows["drift"]
+    assert drifted["same_length"] and not drifted["identical"]
+    assert abs(drifted["correlation"] - 2 / 3) < 0.02  # 30 of 45 s the same
+    assert abs(drifted["correlation_last_30s"] - 1 / 2) < 0.02
+    assert drifted["max_abs_diff"] > 0.1 and not drifted["beats_equal"]
+    # The command writes the same comparison, with how it was made.
+    main(["compare", "--root", str(a), "--other", str(b), "--out", str(tmp_path / "c.json")])
+    written = json.loads((tmp_path / "c.json").read_text())
+    assert written["songs"] == out["songs"]
+    assert written["command"] == f"python -m benchmarks.real_music compare --root {a} --other {b}"
+
+
 def test_real_bench_names_its_set_and_command(monkeypatch, tmp_path: Path) -> None:
     import json
 
     import benchmarks.real_music as real_music
 
-    root = tmp_path / "set"
-    (root / "beats").mkdir(parents=True)
-    sf.write(str(root / "a.wav"), np.zeros(22050, np.float32), 22050)
-    np.savetxt(root / "beats/a.beats", [0.1, 0.6])
-    np.savetxt(root / "beats/a.downbeats", [0.1])
-    (root / "L.md").write_text("licence")
-    entry = {"name": "a", "split": "heldout", "kind": "lmms_render", "title": "A", "artist": "B",
-             "audio": "a.wav", "beats": "beats/a.beats", "downbeats": "beats/a.downbeats",
-             "licence_file": "L.md", "licence": "MIT", "duration_s": 1.0,
-             "tempo_bpm": [120, 120], "meter": "4/4"}  # fmt: skip
-    manifest = {"description": "Songs of a test", "songs": [entry]}
-    (root / "manifest.json").write_text(json.dumps(manifest))
+    root = _tiny_set(tmp_path / "set", {"a": np.zeros(22050, np.float32)})
     row = {"name": "a", "split": "heldout", "kind": "lmms_render", "duration_s": 60.0,
            "lock_s": 2.0, "f_offline": 0.5}  # fmt: skip
     monkeypatch.setattr(real_music, "score_song", lambda song, madmom=None: dict(row))
