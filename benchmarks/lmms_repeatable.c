@@ -1,9 +1,9 @@
 /* Makes an LMMS render repeatable: loaded with LD_PRELOAD by `benchmarks/real_music.py`.
  *
- * LMMS seeds rand() from its pid and the clock, and mixes on one worker thread per CPU, whose
- * order of calls into the shared generator changes from run to run; so two renders of one
- * project differ (noise, random phases). Here the seed is fixed, and LMMS is told that the
- * machine has one CPU, so it mixes on one thread.
+ * LMMS seeds rand() from its pid and the clock, and mixes on one worker thread per CPU; two
+ * renders of one project differ, and fixing the seed alone does not make them agree. Here the
+ * seed is fixed, and LMMS is told that the machine has one CPU, so it mixes on one thread:
+ * two builds then hold the same audio (benchmarks/results/real_music_lmms_repeat.json).
  *
  * Build: cc -shared -fPIC -O2 -o lmms_repeatable.so lmms_repeatable.c -ldl
  */
