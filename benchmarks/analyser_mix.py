@@ -9,7 +9,7 @@ activation is fitted on them: in-sample there) and on the tuning songs of every 
 commit f53a2e1: 60 game-music songs that no model was fitted on). Held-out songs are never
 read.
 
-    python -m benchmarks.analyser_mix [--also ROOT ...] [--out FILE]
+    python -m benchmarks.analyser_mix [--also ROOT ...] [--mix NAME ...] [--out FILE]
 """
 
 from __future__ import annotations
@@ -133,7 +133,8 @@ def main(argv: list[str] | None = None) -> None:
         metric="mean over songs of the analyser's beat F (+-70 ms) at its metrical "
         "level and strict, and its downbeat F; tuning songs only",
         roots=REAL_SET_ROOTS,
-        grid=lambda sets: run(sets, MIXES),
+        mix_names=[m.name for m in MIXES],
+        grid=lambda sets, names: run(sets, tuple(m for m in MIXES if m.name in names)),
     )
 
 

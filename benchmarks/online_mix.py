@@ -8,7 +8,7 @@ full speed as ``bench live`` feeds it (`live.track_file`), on the tuning songs o
 real-music sets and on those of every set given with ``--also`` (e.g. the
 ``benchmarks/real_music_fit`` set of commit f53a2e1). Held-out songs are never read.
 
-    python -m benchmarks.online_mix [--also ROOT ...] [--out FILE]
+    python -m benchmarks.online_mix [--also ROOT ...] [--mix NAME ...] [--out FILE]
 """
 
 from __future__ import annotations
@@ -106,7 +106,8 @@ def main(argv: list[str] | None = None) -> None:
         "level and strict after its first lock, the share of songs locked within 6 s and "
         "its CPU time per second of audio; tuning songs only",
         roots=REAL_SET_ROOTS,
-        grid=lambda sets: run(sets, MIXES),
+        mix_names=[m.name for m in MIXES],
+        grid=lambda sets, names: run(sets, tuple(m for m in MIXES if m.name in names)),
     )
 
 

@@ -6,7 +6,8 @@ tracker) share."""
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable
+import shlex
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -56,23 +57,40 @@ def main(
     results: str,
     metric: str,
     roots: dict[str, Path],
-    grid: Callable[[dict[str, Path]], dict[str, Any]],
+    mix_names: Sequence[str],
+    grid: Callable[[dict[str, Path], list[str]], dict[str, Any]],
 ) -> None:
-    """Parse ``--also`` and ``--out``, score the ``grid`` over the tuning songs of the two
+    """Parse ``--also``, ``--mix`` and ``--out``, score the ``grid`` (the mixes named, in the
+    order of ``mix_names``; all of them without ``--mix``) over the tuning songs of the two
     real-music sets (``roots``: `real_music.REAL_SET_ROOTS`) and of each ``--also`` set, write
     the JSON (atomically) and print each mix's F at the metrical level per set."""
     parser = argparse.ArgumentParser(prog=f"python -m {module}", description=doc.split("\n")[0])
     parser.add_argument("--also", type=Path, nargs="*", default=[], help="more sets' roots")
+    parser.add_argument(
+        "--mix",
+        action="append",
+        metavar="NAME",
+        help="score only this mix, named as in the JSON's by_mix (repeatable; default: all)",
+    )
     parser.add_argument("--out", type=Path, default=Path(results), help="where to write JSON")
     args = parser.parse_args(argv)
+    unknown = [name for name in args.mix or () if name not in mix_names]
+    if unknown:
+        parser.error(f"no mix named {unknown[0]!r}; the mixes: " + ", ".join(mix_names))
+    chosen = [name for name in mix_names if name in (args.mix or mix_names)]
     sets = {"tuning": roots["real"], "tuning-lmms": roots["real-lmms"]}
     sets.update({root.name: root for root in args.also})
-    result = grid(sets)
+    result = grid(sets, chosen)
+    command = ["python", "-m", module]
+    for root in args.also:
+        command += ["--also", str(root)]
+    for name in args.mix or ():
+        command += ["--mix", name]
     write_json(
         args.out,
         {
             "benchmark": module.rsplit(".", 1)[-1],
-            "command": f"python -m {module}" + "".join(f" --also {root}" for root in args.also),
+            "command": shlex.join(command),
             "metric": metric,
             **result,
         },

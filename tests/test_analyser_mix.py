@@ -50,6 +50,15 @@ def test_the_grid_scores_each_mix_on_the_tuning_songs_only(two_sets, tmp_path: P
         assert result["by_mix"][name]["tuning"] == songs["tuning/a_tuning"]
 
 
+def test_mix_scores_only_the_mixes_named(two_sets, tmp_path: Path) -> None:
+    out = tmp_path / "mix.json"
+    name = "own 0.5, beatnet 0.5 x 1"
+    am.main(["--mix", name, "--out", str(out)])
+    result = json.loads(out.read_text())
+    assert list(result["by_mix"]) == list(result["per_song"]) == [name]
+    assert set(result["per_song"][name]) == {"tuning/a_tuning", "tuning-lmms/b_tuning"}
+
+
 def test_a_mix_is_the_analysers_config() -> None:
     cfg = am.Mix(0.25, 0.75, am.FIVE).config()
     assert (cfg.activation_weight, cfg.beatnet_weight, cfg.beatnet_stretches) == (

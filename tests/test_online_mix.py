@@ -73,3 +73,25 @@ def test_a_mix_is_restored_when_its_song_fails(monkeypatch: pytest.MonkeyPatch) 
     with pytest.raises(RuntimeError, match="unreadable"):
         om.score(song, om.Mix(0.75, om.FIVE))
     assert (online_beats.BEATNET_WEIGHT, online_beats.BEATNET_STRETCHES) == (0.5, (1.0,))
+
+
+def test_mix_scores_only_the_mixes_named(two_sets, tmp_path: Path) -> None:
+    out = tmp_path / "mix.json"
+    om.main(["--mix", "beatnet 0.75 x 0.9/1", "--out", str(out)])
+    result = json.loads(out.read_text())
+    assert two_sets == [("a_tuning", (0.75, (0.9, 1.0))), ("b_tuning", (0.75, (0.9, 1.0)))]
+    assert list(result["by_mix"]) == list(result["per_song"]) == ["beatnet 0.75 x 0.9/1"]
+    assert result["command"] == "python -m benchmarks.online_mix --mix 'beatnet 0.75 x 0.9/1'"
+
+
+def test_an_unknown_mix_is_one_line_naming_the_mixes(
+    two_sets, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as stop:
+        om.main(["--mix", "beatnet 0.6 x 1", "--out", str(tmp_path / "mix.json")])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "no mix named 'beatnet 0.6 x 1'" in err
+    assert "beatnet 0.5 x 1, beatnet 0.75 x 0.9/1" in err
+    assert two_sets == []
+    assert not (tmp_path / "mix.json").exists()
