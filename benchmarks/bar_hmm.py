@@ -17,8 +17,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from quaddance.music.analysis import peak_vertex
-
 
 @dataclass(frozen=True)
 class DecoderConfig:
@@ -210,3 +208,14 @@ def _beats_of_path(space: BarStateSpace, path: np.ndarray, act: np.ndarray) -> D
         down.append(space.beat_index[path[s]] == 0)
     meter = int(space.meters[np.searchsorted(space.block_start, path[-1], "right") - 1])
     return Decoded(np.array(frames, float), np.array(down, bool), meter)
+
+
+def peak_vertex(x: np.ndarray, j: int) -> float:
+    """Frame ``j`` of ``x`` moved to the vertex of the parabola through it and its neighbours
+    where it is a peak (the vertex then lies within half a frame), else ``j`` itself."""
+    if 0 < j < len(x) - 1:
+        y0, y1, y2 = x[j - 1], x[j], x[j + 1]
+        denom = y0 - 2 * y1 + y2
+        if y1 >= max(y0, y2) and denom < 0:
+            return j + 0.5 * (y0 - y2) / denom
+    return float(j)

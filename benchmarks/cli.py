@@ -193,7 +193,7 @@ def bench_beats_cmd(
     tuning and held-out parts) offline, online (after the lock), with librosa and with
     BeatNet's published networks (CC BY 4.0) decoded by a bar-pointer HMM. "real-lmms" scores
     the same way the demo songs of LMMS, rendered by LMMS (build them first: apt-get install
-    lmms; python -m benchmarks.real_music build --root benchmarks/real_music_lmms).
+    lmms gcc; python -m benchmarks.real_music build --root benchmarks/real_music_lmms).
     """
     from rich.console import Console
     from rich.table import Table

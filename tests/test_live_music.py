@@ -419,7 +419,7 @@ def test_tracker_keeps_the_beat_when_loud_off_beat_hats_come_in() -> None:
 def test_tracker_moves_off_swung_off_beats_onto_the_beat() -> None:
     """Swung hats alone (at 0.6 of each beat) for 8 s: the tracker locks on them, and the
     phase hold keeps that grid once kicks come in on the beats, since the hats still support
-    it. The swing test (`analysis.swing_shift`, online) moves the grid onto the kicks within
+    it. The swing test (`online_beats.swing_shift`) moves the grid onto the kicks within
     `SWING_BEATS` beats; before it, the beats stayed on the hats to the end."""
     bpm, kicks_from_s, swing_at = 110.0, 8.0, 0.6
     period_s = 60.0 / bpm
@@ -680,7 +680,7 @@ def test_tracker_keeps_the_true_tempo_through_syncopation_and_after_a_break() ->
     """`bench live`'s live_128_break_phase: 128 BPM throughout. The syncopated first part's
     3+3+2 accents pull the tempo estimate to 2/3 (85 BPM), which the locked tracker must not
     follow (`HELD_LEVEL_RATIOS`); after 2.2 s of silence the second part is first heard at
-    half tempo (64 BPM), until its snare backbeat doubles it (`analysis.backbeat_heard`)."""
+    half tempo (64 BPM), until its snare backbeat doubles it (`online_beats.backbeat_heard`)."""
     from benchmarks.live import live_songs
 
     song = next(s for s in live_songs(SR_HZ, midi=False) if s.name == "live_128_break_phase")

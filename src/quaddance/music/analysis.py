@@ -20,14 +20,11 @@ Ellis 2007) with the changes that matter for dance music:
    open: octave errors dominate beat-tracking errors (FACTS.md §4).
 3. The tempo may change: a local tempo curve (Viterbi over windowed autocorrelation near the
    global tempo, with drift and jumps) guides the dynamic program.
-4. Swing: beats that landed on swung off-beats are moved back onto the beat.
-   Off-beats: beats move by half a beat when the bass line changes pitch at their midpoints
+4. Off-beats: beats move by half a beat when the bass line changes pitch at their midpoints
    rather than at them (off-beat hats, skanking keys pull the tracker; harmony does not move).
-   Backbeat: the tempo doubles when the midpoints hold hits as strong as the beats and clearly
-   stronger than the quarter-beat positions (a rock snare on 2 and 4 heard at half tempo: the
-   150 BPM song reported at 75), as long as the doubled tempo stays in the dance range.
-   Last, beats faster than the dance range (`DANCE_TEMPO_BPM`, 60-180 BPM) are halved and
-   slower ones doubled, so that the beat level reported is one a robot dances.
+   Then beats faster than the dance range (`DANCE_TEMPO_BPM`, 60-180 BPM) are halved and
+   slower ones doubled, so that the beat level reported is one a robot dances. Each beat stays
+   on its onset frame: moving it to the envelope's nearby peak gained nothing on real music.
 5. Downbeats: the 4/4 bar phase with the most bass onsets, chord changes and BeatNet's
    downbeat probability on beat 1.
 6. Sections: checkerboard novelty on bar-synchronous loudness, onset density and harmony.
@@ -104,14 +101,6 @@ class AnalysisConfig:
     offbeat_harmony_ratio: float = 2.0
     """Beats move by half a beat when the bass line changes pitch this many times more at the
     midpoints between them than at the beats (tuned)."""
-    backbeat_ratio: float = 0.75
-    """Tempo doubles when the midpoints between beats carry hits this strong relative to the
-    beats (a snare backbeat heard at half tempo; tuned)."""
-    backbeat_contrast: float = 1.5
-    """... and at least this much stronger than the quarter-beat positions, so that a steady
-    stream of notes (an arpeggio) does not count as a backbeat (tuned)."""
-    max_doubled_bpm: float = 165.0
-    """Doubling stops here: the top of the usual dance tempi 80-160 BPM plus a margin."""
     tightness: float = 1000.0
     """Penalty on beat intervals off the local period, per squared log ratio, in standard
     deviations of the beat envelope (librosa's 100 is looser; our local tempo curve already
@@ -159,7 +148,7 @@ class Analysis:
         duration_s: length of the audio, seconds.
         source: the file analysed, or "" for an array.
         extra: diagnostics that are not saved (``global_tempo_bpm``: tempo before tracking;
-            ``offbeat_shift``, ``backbeat_double``: whether those corrections were made).
+            ``offbeat_shift``: whether the beats moved by half a beat).
     """
 
     tempo_bpm: float
@@ -514,43 +503,6 @@ def _track_beats(onset: np.ndarray, period: np.ndarray, tightness: float) -> np.
     return np.array(beats[::-1])
 
 
-SWING_FRACTIONS = np.linspace(0.0, 1.0, 41)[1:-1]
-"""Positions inside a beat (fractions of it) at which `swing_shift` reads the onset profile."""
-
-
-def beat_profile(beat_frames: np.ndarray, onset: np.ndarray) -> np.ndarray:
-    """(len(SWING_FRACTIONS),) mean onset at each fraction of the intervals between
-    ``beat_frames`` (frames of ``onset``, ascending, at least two)."""
-    starts, ends = beat_frames[:-1], beat_frames[1:]
-    pos = starts[:, None] + SWING_FRACTIONS[None, :] * (ends - starts)[:, None]
-    return np.interp(pos, np.arange(len(onset)), onset).mean(axis=0)
-
-
-def swing_shift(profile: np.ndarray) -> float:
-    """Fraction of a beat to move the beats by when they sit on swung off-beats, else 0.
-
-    Swing delays the off-beat (to 0.55-0.7 of the beat); it never anticipates it. So when the
-    strongest onset inside the tracked beats (``profile``, from `beat_profile`) comes early
-    (before 0.47 of the beat) and its mirror position is empty, the tracker has locked onto the
-    swung off-beats and the true beats lie that fraction later. Shared by the offline analyser
-    and the online tracker.
-    """
-    middle = (SWING_FRACTIONS > 0.25) & (SWING_FRACTIONS < 0.75)
-    i = int(np.argmax(np.where(middle, profile, -np.inf)))
-    f = SWING_FRACTIONS[i]
-    mirror = float(np.interp(1.0 - f, SWING_FRACTIONS, profile))
-    if f < 0.47 and profile[i] > 2.0 * mirror:
-        return float(f)
-    return 0.0
-
-
-def _swing_shift(beat_frames: np.ndarray, onset: np.ndarray) -> float:
-    """`swing_shift` over the whole song's beats (0 for fewer than 8 beats)."""
-    if len(beat_frames) < 8:
-        return 0.0
-    return swing_shift(beat_profile(beat_frames, onset))
-
-
 SILENT_CHROMA_RATIO = 1e-4
 """`_chroma_change` counts no change where the mean chroma on either side has less than this
 fraction of the loudest side's norm (-40 dB of chroma power)."""
@@ -601,60 +553,6 @@ def offbeat_harmony(bass_chroma: np.ndarray, beat_frames: np.ndarray, cfg: Analy
     on = _chroma_change(bass_chroma, starts, half).mean()
     mid = _chroma_change(bass_chroma, starts + half, half).mean()
     return bool(mid > cfg.offbeat_harmony_ratio * on and mid > 0.05)
-
-
-def _backbeat_double(beat_frames: np.ndarray, feats: _Features, cfg: AnalysisConfig) -> bool:
-    """True when the tempo should double: the midpoints between beats carry hits about as
-    strong as the beats, and clearly stronger than the quarter-beat positions.
-
-    That is the snare backbeat of rock heard at half tempo (kick on our beats, snare halfway):
-    the true beat is twice as fast. Only done while the doubled tempo stays in the dance range.
-    """
-    if len(beat_frames) < 8:
-        return False
-    period = float(np.median(np.diff(beat_frames)))
-    if 60.0 * feats.fps / period * 2.0 > cfg.max_doubled_bpm:
-        return False
-    import scipy.ndimage
-
-    # A hit may land a frame off the interpolated position: take the local maximum.
-    hit = scipy.ndimage.maximum_filter1d(feats.hit_onset, size=3)
-    fractions = np.array([0.0, 0.25, 0.5, 0.75])
-    starts = beat_frames[:-1].astype(float)
-    pos = starts[:, None] + fractions[None, :] * np.diff(beat_frames)[:, None]
-    return backbeat_heard(np.interp(pos, np.arange(len(hit)), hit).mean(axis=0), cfg)
-
-
-def backbeat_heard(hits: np.ndarray, cfg: AnalysisConfig) -> bool:
-    """The backbeat test on the mean hit strength at 0, 1/4, 1/2 and 3/4 of the beat (4,):
-    the midpoints carry hits about as strong as the beats (``cfg.backbeat_ratio``) and
-    clearly stronger than the quarter-beat positions (``cfg.backbeat_contrast``). Shared by
-    this analyser and the online tracker (`music.online_beats`)."""
-    beat, q1, mid, q3 = (float(h) for h in hits)
-    return mid >= cfg.backbeat_ratio * beat and mid >= cfg.backbeat_contrast * max(q1, q3)
-
-
-def peak_vertex(x: np.ndarray, j: int) -> float:
-    """Frame ``j`` of ``x`` moved to the vertex of the parabola through it and its neighbours
-    where it is a peak (the vertex then lies within half a frame), else ``j`` itself."""
-    if 0 < j < len(x) - 1:
-        y0, y1, y2 = x[j - 1], x[j], x[j + 1]
-        denom = y0 - 2 * y1 + y2
-        if y1 >= max(y0, y2) and denom < 0:
-            return j + 0.5 * (y0 - y2) / denom
-    return float(j)
-
-
-def _refine(beats: np.ndarray, onset: np.ndarray, radius: int = 1) -> np.ndarray:
-    """Sub-frame beat positions: the highest onset frame within ``radius`` of each beat frame,
-    at its `peak_vertex` (on a slope it stays on the frame; at a peak it moves by at most half
-    a frame)."""
-    out = beats.astype(float)
-    n = len(onset)
-    for i, b in enumerate(beats):
-        a, c = max(0, b - radius), min(n - 1, b + radius)
-        out[i] = peak_vertex(onset, a + int(np.argmax(onset[a : c + 1])))
-    return out
 
 
 def dance_level(beats_s: np.ndarray, strength: np.ndarray) -> np.ndarray:
@@ -803,21 +701,13 @@ def analyze(y: np.ndarray, sr: int, cfg: AnalysisConfig | None = None) -> Analys
     period = _local_period(feats.tempo_onset, fps, tempo_bpm, cfg)
     beat_frames = _track_beats(feats.beat_onset, period, cfg.tightness)
     beat_frames = _trim_silence(beat_frames, feats.rms)
-    shift = _swing_shift(beat_frames, feats.beat_onset)
-    if shift > 0.0:
-        intervals = np.diff(beat_frames, append=2 * beat_frames[-1] - beat_frames[-2])
-        beat_frames = np.round(beat_frames + shift * intervals).astype(int)
-        beat_frames = beat_frames[beat_frames < len(feats.beat_onset)]
     # Fewer than 8 beats are too few to tell where the harmony changes.
     offbeat_shift = len(beat_frames) >= 8 and offbeat_harmony(feats.bass_chroma, beat_frames, cfg)
     if offbeat_shift:
         intervals = np.diff(beat_frames, append=2 * beat_frames[-1] - beat_frames[-2])
         beat_frames = np.round(beat_frames + 0.5 * intervals).astype(int)
         beat_frames = beat_frames[beat_frames < len(feats.beat_onset)]
-    backbeat_double = _backbeat_double(beat_frames, feats, cfg)
-    if backbeat_double:
-        beat_frames = np.round(with_midpoints(beat_frames)).astype(int)
-    beats_s = _refine(beat_frames, feats.beat_onset) / fps
+    beats_s = beat_frames / fps
     keep = _spaced(beats_s)
     beat_frames, beats_s = beat_frames[keep], beats_s[keep]
     strength = np.interp(beats_s * fps, np.arange(len(feats.beat_onset)), feats.beat_onset)
@@ -841,7 +731,6 @@ def analyze(y: np.ndarray, sr: int, cfg: AnalysisConfig | None = None) -> Analys
         extra={
             "global_tempo_bpm": global_bpm,
             "offbeat_shift": offbeat_shift,
-            "backbeat_double": backbeat_double,
         },
     )
 

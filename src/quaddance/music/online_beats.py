@@ -56,8 +56,8 @@ The tracker sees the audio block by block and never looks ahead. Per 11.6 ms fra
    follows its own onsets: each supported beat moves the next ones onto its onset peak.
    Swing: the held grid can be the swung off-beats themselves (swung hats heard before the
    drums, or chosen after a tempo change), which stay supported. Every ``SWING_BEATS`` beats
-   the onsets are folded over the reported grid, and the offline analyser's swing test
-   (``analysis.swing_shift``, stricter here) moves the grid onto the beat.
+   the onsets are folded over the reported grid, and the swing test (`swing_shift`) moves
+   the grid onto the beat.
    At the lock the swing test also runs on the heard grid, so that a lock reached on swung
    off-beats is moved before its beats are danced to. (The offline analyser's bass-harmony
    off-beat test is not run here: on real music it moved the grid off the beat more often than
@@ -97,14 +97,9 @@ from quaddance.layout import BEATS_PER_BAR, DANCE_TEMPO_BPM
 from quaddance.music import beatnet
 from quaddance.music.analysis import (
     MIN_BEAT_GAP_S,
-    SWING_FRACTIONS,
-    AnalysisConfig,
     autocorrelation,
-    backbeat_heard,
-    beat_profile,
     blend,
     harmonic_salience,
-    swing_shift,
 )
 from quaddance.music.audio import DEFAULT_SR
 
@@ -241,12 +236,15 @@ BACKBEAT_PERIODS = 4
 BACKBEAT_MIN_PERIODS = 3
 """Beat periods of the recent music that the backbeat test (item 2) folds together: the last
 4, at least 3 (2 let the first second's noise through: a 60 BPM click track doubled)."""
-ANALYSER_CFG = AnalysisConfig()
-"""The settings of the backbeat test, the offline analyser's. The backbeat test
-(`analysis.backbeat_heard`): the tempo doubles when the midpoints between the beats carry hits
-about as strong as the beats and clearly stronger than the quarter-beat positions (a snare
-backbeat heard at half tempo), while the doubled tempo stays at most
-``ANALYSER_CFG.max_doubled_bpm``."""
+BACKBEAT_RATIO = 0.75
+"""The backbeat test (`backbeat_heard`): the tempo doubles when the midpoints between the beats
+carry hits this strong relative to the beats (a snare backbeat heard at half tempo; tuned)..."""
+BACKBEAT_CONTRAST = 1.5
+"""... and at least this much stronger than the quarter-beat positions, so that a steady stream
+of notes (an arpeggio) does not count as a backbeat (tuned)..."""
+MAX_DOUBLED_BPM = 165.0
+"""... while the doubled tempo stays at most this: the top of the usual dance tempi 80-160 BPM
+plus a margin."""
 STEADY_TEMPO_RATIO = 1.04
 """Tempo counts as steady when it stays within this ratio over the lock's beats."""
 PHASE_JUMP_BEATS = 0.25
@@ -258,9 +256,9 @@ no more than the half beat to an off-beat or the third of a beat to a swung one.
 
 SWING_BEATS = 6
 """While locked, the onsets of the last this many beat intervals are folded over the reported
-grid, and the grid moves onto the beat when it sits on swung off-beats (item 5; the offline
-analyser's `swing_shift`, which wants 8 beats of a whole song: 6 here moved the one tuning
-song it moves 2 beats sooner, and no other); then as many new beats before the next test."""
+grid, and the grid moves onto the beat when it sits on swung off-beats (item 5, `swing_shift`;
+6 rather than 8 moved the one tuning song it moves 2 beats sooner, and no other); then as many
+new beats before the next test."""
 SWING_SHIFT_RANGE = (0.3, 0.42)
 """Shifts (fractions of a beat) the online swing test makes: off-beats swung to 0.58-0.7."""
 SWING_NEAR = 0.1
@@ -336,6 +334,43 @@ class BeatEvent:
     @property
     def downbeat(self) -> bool:
         return self.beat_in_bar == 0
+
+
+SWING_FRACTIONS = np.linspace(0.0, 1.0, 41)[1:-1]
+"""Positions inside a beat (fractions of it) at which `swing_shift` reads the onset profile."""
+
+
+def beat_profile(beat_frames: np.ndarray, onset: np.ndarray) -> np.ndarray:
+    """(len(SWING_FRACTIONS),) mean onset at each fraction of the intervals between
+    ``beat_frames`` (frames of ``onset``, ascending, at least two)."""
+    starts, ends = beat_frames[:-1], beat_frames[1:]
+    pos = starts[:, None] + SWING_FRACTIONS[None, :] * (ends - starts)[:, None]
+    return np.interp(pos, np.arange(len(onset)), onset).mean(axis=0)
+
+
+def swing_shift(profile: np.ndarray) -> float:
+    """Fraction of a beat to move the beats by when they sit on swung off-beats, else 0.
+
+    Swing delays the off-beat (to 0.55-0.7 of the beat); it never anticipates it. So when the
+    strongest onset inside the tracked beats (``profile``, from `beat_profile`) comes early
+    (before 0.47 of the beat) and its mirror position is empty, the tracker has locked onto the
+    swung off-beats and the true beats lie that fraction later.
+    """
+    middle = (SWING_FRACTIONS > 0.25) & (SWING_FRACTIONS < 0.75)
+    i = int(np.argmax(np.where(middle, profile, -np.inf)))
+    f = SWING_FRACTIONS[i]
+    mirror = float(np.interp(1.0 - f, SWING_FRACTIONS, profile))
+    if f < 0.47 and profile[i] > 2.0 * mirror:
+        return float(f)
+    return 0.0
+
+
+def backbeat_heard(hits: np.ndarray) -> bool:
+    """The backbeat test on the mean hit strength at 0, 1/4, 1/2 and 3/4 of the beat (4,): the
+    midpoints carry hits about as strong as the beats (`BACKBEAT_RATIO`) and clearly stronger
+    than the quarter-beat positions (`BACKBEAT_CONTRAST`)."""
+    beat, q1, mid, q3 = (float(h) for h in hits)
+    return mid >= BACKBEAT_RATIO * beat and mid >= BACKBEAT_CONTRAST * max(q1, q3)
 
 
 @dataclass(frozen=True)
@@ -1014,10 +1049,10 @@ class _Listener:
 
     def _backbeat_double(self, period: float) -> bool:
         """Whether the music heard so far, folded over ``period`` (frames), shows a snare
-        backbeat heard at half tempo (see `ANALYSER_CFG`): the onsets are averaged at 16
+        backbeat heard at half tempo (`backbeat_heard`): the onsets are averaged at 16
         phases of the period over its last `BACKBEAT_PERIODS` (fewer right after a restart,
         at least `BACKBEAT_MIN_PERIODS`); the strongest phase stands for the beat."""
-        if 60.0 * self._fps / period * 2.0 > ANALYSER_CFG.max_doubled_bpm:
+        if 60.0 * self._fps / period * 2.0 > MAX_DOUBLED_BPM:
             return False
         onset = np.asarray(self._onset_b)
         n = min(BACKBEAT_PERIODS, int((len(onset) - 2) // period))
@@ -1029,7 +1064,7 @@ class _Listener:
         pos = start + period * (np.arange(n)[:, None] + np.arange(16)[None, :] / 16.0)
         profile = np.interp(pos, np.arange(len(hit)), hit).mean(axis=0)
         k = int(np.argmax(profile))
-        return backbeat_heard(profile[(k + np.array([0, 4, 8, 12])) % 16], ANALYSER_CFG)
+        return backbeat_heard(profile[(k + np.array([0, 4, 8, 12])) % 16])
 
     def _rebuild_cumscore(self) -> None:
         """Recompute the cumulative beat score over the history with the new period: scores
@@ -1149,7 +1184,7 @@ class _Listener:
 
     def _swing_test(self, onset: np.ndarray, frames: np.ndarray) -> None:
         """Move the reported grid onto the beat when the onsets folded over the beats at history
-        ``frames`` show it on swung off-beats (`analysis.swing_shift`)."""
+        ``frames`` show it on swung off-beats (`swing_shift`)."""
         profile = beat_profile(frames, onset)
         shift = swing_shift(profile)
         # Stricter than offline, where the beats sit on their onsets: the reported grid may lie
