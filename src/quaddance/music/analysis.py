@@ -575,7 +575,7 @@ def dance_level(beats_s: np.ndarray, strength: np.ndarray) -> np.ndarray:
 
 def with_midpoints(beats: np.ndarray) -> np.ndarray:
     """(2 n - 1,) increasing ``beats`` and the midpoints between them: the beat at twice the
-    rate (the backbeat test's doubling, and `dance_level`'s)."""
+    rate (`dance_level`'s doubling)."""
     return np.sort(np.concatenate([beats, 0.5 * (beats[1:] + beats[:-1])]))
 
 

@@ -17,8 +17,8 @@ The tracker sees the audio block by block and never looks ahead. Per 11.6 ms fra
    cost; a recent-weighted window lets a tempo change win within a few seconds (a shorter
    one once the beats start missing their onsets), and the beat score is then recomputed on
    the new period so the beats move onto the new grid at once.
-   Before the lock, a tempo heard at half a snare backbeat doubles (the offline analyser's
-   backbeat test, on the recent music folded over the beat period); once locked, the
+   Before the lock, a tempo heard at half a snare backbeat doubles (`backbeat_heard`, on the
+   recent music folded over the beat period); once locked, the
    metrical level is held: a filter tempo of double, half, 3/2 or 2/3 of the locked one
    (``HELD_LEVEL_RATIOS``) keeps the tempo at the locked level. Syncopated parts that repeat
    every 3 sixteenths (3+3+2, a clave) make the autocorrelation as strong at 4/3 of the
