@@ -390,6 +390,30 @@ def test_the_analyser_reports_a_level_inside_the_dance_range(click_bpm, level_bp
     assert np.all(np.diff(result.beats_s) >= 0.2)
 
 
+def test_the_tempo_is_read_finer_than_the_frame_grid_of_the_beats() -> None:
+    # 140 BPM beats on the envelope's frames: single intervals are 18 or 19 frames (143.6 or
+    # 136.0 BPM); spans of 4 beats read the tempo within a quarter of a frame per beat.
+    from quaddance.music.analysis import median_beat_period_s
+
+    fps = SR / 512
+    beats_s = np.round(np.arange(80) * 60.0 / 140.0 * fps) / fps
+    assert 60.0 / np.median(np.diff(beats_s)) == pytest.approx(143.55, abs=0.01)
+    assert 60.0 / median_beat_period_s(beats_s) == pytest.approx(140.0, rel=0.005)
+    # A silent break (beats missing for 10 s) does not move it; two beats give their interval.
+    gap = np.concatenate([beats_s[:40], beats_s[40:] + 10.0])
+    assert 60.0 / median_beat_period_s(gap) == pytest.approx(140.0, rel=0.005)
+    assert median_beat_period_s(np.array([1.0, 1.5])) == pytest.approx(0.5)
+
+
+def test_a_click_track_reports_its_tempo_within_half_a_percent() -> None:
+    y = np.zeros(int(30.0 * SR), dtype=np.float32)
+    click = np.sin(2 * np.pi * 1000.0 * np.arange(220) / SR) * np.hanning(220)
+    for t_s in np.arange(0.5, 29.5, 60.0 / 140.0):
+        i = int(t_s * SR)
+        y[i : i + 220] += click.astype(np.float32)
+    assert analyze(y, SR).tempo_bpm == pytest.approx(140.0, rel=0.005)
+
+
 @pytest.mark.parametrize("seed", [0, 1])
 def test_beats_keep_their_phase_through_a_passage_of_louder_off_beats(seed: int) -> None:
     # 140 BPM kicks on the beat; for 12 s in the middle the kicks drop to half and a snare

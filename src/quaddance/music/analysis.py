@@ -47,6 +47,8 @@ from quaddance.errors import InputFileError
 from quaddance.layout import BEATS_PER_BAR, DANCE_TEMPO_BPM
 from quaddance.music import beat_activation
 
+TEMPO_SPAN_BEATS = 4
+"""Beats per span over which `median_beat_period_s` measures the reported tempo."""
 MIN_BEAT_GAP_S = 0.2
 """Beats are at least this far apart, seconds (300 BPM, above any dance tempo): the offline
 analyser and the online tracker (`music.online_beats`) drop a beat that would come sooner
@@ -718,7 +720,7 @@ def analyze(y: np.ndarray, sr: int, cfg: AnalysisConfig | None = None) -> Analys
     downbeat_frames = beat_frames[phase::BEATS_PER_BAR]
     section_frames = _sections(downbeat_frames, feats, cfg)
     if len(beats_s) > 1:
-        tempo_bpm = float(60.0 / np.median(np.diff(beats_s)))
+        tempo_bpm = 60.0 / median_beat_period_s(beats_s)
     return Analysis(
         tempo_bpm=tempo_bpm,
         beats_s=beats_s,
@@ -733,6 +735,16 @@ def analyze(y: np.ndarray, sr: int, cfg: AnalysisConfig | None = None) -> Analys
             "offbeat_shift": offbeat_shift,
         },
     )
+
+
+def median_beat_period_s(beats_s: np.ndarray) -> float:
+    """The median beat period of increasing ``beats_s`` (two or more), seconds, over spans of
+    `TEMPO_SPAN_BEATS` beats: the beats lie on whole envelope frames (23.2 ms), so the median
+    of single intervals moves in whole frames (140 BPM reads 136.0 or 143.6), while a span's
+    length divided by its beats moves in a quarter of one. A span across a silent break is an
+    outlier that the median leaves out."""
+    k = min(TEMPO_SPAN_BEATS, len(beats_s) - 1)
+    return float(np.median((beats_s[k:] - beats_s[:-k]) / k))
 
 
 def _trim_silence(beat_frames: np.ndarray, rms: np.ndarray) -> np.ndarray:
