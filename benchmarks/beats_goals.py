@@ -19,7 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.real_music import run_as_script
+from benchmarks.real_music import DOWNBEAT_KEYS, REPORT_TRACKERS, run_as_script, song_means
+from quaddance.layout import DANCE_TEMPO_BPM
 
 MODULE = "benchmarks.beats_goals"
 RESULTS = (
@@ -34,19 +35,8 @@ BOOTSTRAP_DRAWS = 10_000
 TIE_F = 0.01
 """Songs whose F differs by less than this count as neither side's win."""
 
-#: Mean F per tracker: (key in the results' song rows, name in the report).
-TRACKERS = (
-    ("offline", "quaddance offline (`analyze`)"),
-    ("online", "quaddance online (`live`), after its lock"),
-    ("madmom_dbn", "madmom offline (RNN + DBN; CC BY-NC-SA, never shipped)"),
-    ("madmom_online", "madmom online (forward RNN + online DBN), same span"),
-    ("librosa", "librosa `beat_track`"),
-    ("beatnet", "BeatNet's CRNNs (CC BY 4.0) + bar-pointer HMM"),
-)
 #: Ours against madmom, song by song: (ours, madmom's).
 PAIRS = (("offline", "madmom_dbn"), ("online", "madmom_online"))
-DANCE_RANGE_BPM = (60.0, 180.0)
-"""Where the tempo level a tracker chooses must lie (the dance range)."""
 
 
 @dataclass(frozen=True)
@@ -89,12 +79,13 @@ def paired(rows: list[dict[str, Any]], ours: str, theirs: str, metric: str) -> d
     }
 
 
-def goals(rows: list[dict[str, Any]], means: dict[str, dict[str, float]]) -> list[Goal]:
-    """The tracker's goals on the held-out songs, each with the figure that decides it."""
+def goals(rows: list[dict[str, Any]], pooled: dict[str, Any]) -> list[Goal]:
+    """The tracker's goals on the held-out songs (``pooled``: their `song_means`), each with
+    the figure that decides it."""
     n = len(rows)
-    off, on = means["offline"]["f_metrical"], means["online"]["f_metrical"]
-    mm_off, mm_on = means["madmom_dbn"]["f_metrical"], means["madmom_online"]["f_metrical"]
-    locked = sum(1 for r in rows if r["lock_s"] is not None and r["lock_s"] <= 6.0)
+    off, on = pooled["f_metrical_offline"], pooled["f_metrical_online"]
+    mm_off, mm_on = pooled["f_metrical_madmom_dbn"], pooled["f_metrical_madmom_online"]
+    locked = pooled["locked_within_6s"]
     # Each results file was made on its own machine: the CPU share is judged per set.
     cpu = {
         name: float(np.mean([r["online_cpu_per_audio_s"] for r in rows if r["set"] == name]))
@@ -112,10 +103,10 @@ def goals(rows: list[dict[str, Any]], means: dict[str, dict[str, float]]) -> lis
              max(cpu.values()), f"<= 0.10 ({cpu_text})", max(cpu.values()) <= 0.10),
     ]  # fmt: skip
     for key in ("offline", "online"):
-        ok = sum(bool(r[f"tempo_ok_{key}"]) for r in rows)
+        ok = pooled[f"tempo_ok_{key}"]
         out.append(Goal(f"{key} tempo within 4 % (or x2, x1/2)", ok / n, f"all ({ok} of {n})",
                         ok == n))  # fmt: skip
-        low, high = DANCE_RANGE_BPM
+        low, high = DANCE_TEMPO_BPM
         inside = sum(low <= r[f"tempo_bpm_{key}"] <= high for r in rows)
         out.append(Goal(f"{key} tempo level inside {low:g}-{high:g} BPM", inside / n,
                         f"all ({inside} of {n})", inside == n))  # fmt: skip
@@ -129,29 +120,28 @@ def score(results: list[dict[str, Any]]) -> dict[str, Any]:
     rows = heldout_rows(results)
     if not rows:
         raise ValueError("the results hold no held-out song")
-    means: dict[str, dict[str, float]] = {}
-    for key, _ in TRACKERS:
-        if all(f"f_{key}" in r for r in rows):
-            means[key] = {m: round(float(np.mean([r[f"{m}_{key}"] for r in rows])), 4)
-                          for m in ("f", "f_metrical")}  # fmt: skip
-    for key in ("offline", "online", "madmom_dbn", "beatnet"):
-        column = "f_downbeat_madmom" if key == "madmom_dbn" else f"f_downbeat_{key}"
-        if key in means and all(column in r for r in rows):
-            means[key]["f_downbeat"] = round(float(np.mean([r[column] for r in rows])), 4)
+    pooled = song_means(rows)
+    # Per tracker that every song has scores of: F strict, at its level, and downbeat F.
+    means = {
+        key: {m: pooled[k] for m, k in (("f", f"f_{key}"), ("f_metrical", f"f_metrical_{key}"),
+                                        ("f_downbeat", DOWNBEAT_KEYS.get(key))) if k in pooled}
+        for key, _ in REPORT_TRACKERS
+        if f"f_{key}" in pooled
+    }  # fmt: skip
     missing = [k for k in ("offline", "online", "madmom_dbn", "madmom_online") if k not in means]
     if missing:
         raise ValueError(f"the results lack {', '.join(missing)} (was madmom installed?)")
     return {
         "benchmark": "beats_goals",
         "sets": sorted({r["set"] for r in rows}),
-        "n_songs": len(rows),
-        "minutes": round(sum(r["duration_s"] for r in rows) / 60, 1),
+        "n_songs": pooled["n_songs"],
+        "minutes": pooled["minutes"],
         "means": means,
         "paired": {
             f"{ours} - {theirs}": {m: paired(rows, ours, theirs, m) for m in ("f_metrical", "f")}
             for ours, theirs in PAIRS
         },
-        "goals": [g.__dict__ for g in goals(rows, means)],
+        "goals": [g.__dict__ for g in goals(rows, pooled)],
         "songs": [r["name"] for r in rows],
     }
 
@@ -165,12 +155,13 @@ def report_md(scored: dict[str, Any], sources: list[str]) -> str:
         f"`quaddance bench beats --sets {' / '.join(scored['sets'])}`): the held-out songs of "
         f"both sets, {n} songs, {scored['minutes']} min. Beat F-measure, +-70 ms; online "
         "figures count the beats after the tracker's first lock, madmom's online tracker "
-        "scored over the same span.",
+        "scored over the same span. madmom's models are CC BY-NC-SA: compared against, never "
+        "shipped.",
         "",
         "| tracker | F strict | F at its metrical level | downbeat F |",
         "|---|---|---|---|",
     ]
-    for key, name in TRACKERS:
+    for key, name in REPORT_TRACKERS:
         if key in means:
             m = means[key]
             down = f"{m['f_downbeat']:.3f}" if "f_downbeat" in m else "-"

@@ -845,7 +845,9 @@ MEAN_KEYS = (
 )  # fmt: skip
 
 
-def _means(rows: list[dict[str, Any]]) -> dict[str, Any]:
+def song_means(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """Means over ``rows`` (`score_song`'s) of every score all of them hold, the songs whose
+    tempo each tracker got right, and the online lock times."""
     out: dict[str, Any] = {
         "n_songs": len(rows),
         "minutes": round(sum(r["duration_s"] for r in rows) / 60, 1),
@@ -923,9 +925,9 @@ def run_real_bench(
         "madmom_python": madmom_python,
         # Per split, and per split and kind: the recordings are the harder, truer test.
         "means": {
-            **{split: _means([r for r in rows if r["split"] == split]) for split in SPLITS},
+            **{split: song_means([r for r in rows if r["split"] == split]) for split in SPLITS},
             **{
-                f"{split}_{kind}": _means(
+                f"{split}_{kind}": song_means(
                     [r for r in rows if r["split"] == split and r["kind"] == kind]
                 )
                 for split in SPLITS
@@ -947,6 +949,14 @@ REPORT_TRACKERS = (
     ("librosa", "librosa `beat_track`"),
     ("beatnet", "BeatNet's CRNNs (CC BY 4.0) + bar-pointer HMM"),
 )
+
+#: Each tracker's downbeat F column, for those that report downbeats.
+DOWNBEAT_KEYS = {
+    "offline": "f_downbeat_offline",
+    "online": "f_downbeat_online",
+    "madmom_dbn": "f_downbeat_madmom",
+    "beatnet": "f_downbeat_beatnet",
+}
 
 
 def _machine_text(machine: dict[str, Any] | None) -> str:
@@ -1020,9 +1030,7 @@ def report_md(results: dict[str, Any]) -> str:
         for key, name in REPORT_TRACKERS:
             if f"f_{key}" not in m:
                 continue
-            downbeat = {"offline": "f_downbeat_offline", "online": "f_downbeat_online",
-                        "madmom_dbn": "f_downbeat_madmom",
-                        "beatnet": "f_downbeat_beatnet"}.get(key)  # fmt: skip
+            downbeat = DOWNBEAT_KEYS.get(key)
             tempo_ok = m.get(f"tempo_ok_{key}")
             tempo = "-" if tempo_ok is None else f"{tempo_ok} of {m['n_songs']}"
             lines.append(

@@ -181,7 +181,7 @@ def test_state_space_transitions_only_at_beat_starts() -> None:
 def test_the_real_music_bench_scores_the_beatnet_tracker(reference, tmp_path: Path) -> None:
     import soundfile as sf
 
-    from benchmarks.real_music import RealSong, _means, report_md, score_song
+    from benchmarks.real_music import RealSong, report_md, score_song, song_means
 
     path = tmp_path / "song.wav"
     sf.write(path, reference["audio"], ba.SR_HZ)
@@ -193,7 +193,7 @@ def test_the_real_music_bench_scores_the_beatnet_tracker(reference, tmp_path: Pa
     )  # fmt: skip
     row = score_song(song)
     assert row["f_metrical_beatnet"] >= 0.9 and row["tempo_ok_beatnet"]
-    mean = _means([row])
+    mean = song_means([row])
     assert mean["f_beatnet"] == row["f_beatnet"] and mean["tempo_ok_beatnet"] == 1
     results = {"command": "c", "set": "s", "metric": "m", "means": {"heldout": mean},
                "songs": [row]}  # fmt: skip
