@@ -38,6 +38,8 @@ MODULE = "benchmarks.analyser_mix"
 RESULTS = "benchmarks/results/analyser_mix.json"
 SR_HZ = 22050
 FIVE = (0.9, 0.93, 1.0, 1.07, 1.1)
+SEVEN = (0.85, *FIVE, 1.15)
+NINE = (0.85, 0.9, 0.93, 0.96, 1.0, 1.04, 1.07, 1.1, 1.15)
 
 
 @dataclass(frozen=True)
@@ -71,9 +73,11 @@ MIXES = (
     Mix(0.4, 0.75, FIVE),
     Mix(0.25, 0.65, FIVE),
     Mix(0.25, 0.85, FIVE),
+    Mix(0.25, 0.75, SEVEN),
+    Mix(0.25, 0.75, NINE),
 )
 """The grid: the shares that shipped before, BeatNet alone, and the neighbours of the default
-(own 0.25, BeatNet 0.75 heard at five speeds) in each setting."""
+(own 0.25, BeatNet 0.75 heard at five speeds) in each setting, its speeds among them."""
 
 
 def score(song: RealSong, y: np.ndarray, mix: Mix) -> dict[str, float]:
