@@ -300,6 +300,8 @@ def dance_table(dance: Dance, analysis: Analysis | None, out: Path) -> Any:
     lifts and heights, and the trunk's range."""
     from rich.table import Table
 
+    from quaddance.music.analysis import median_beat_period_s
+
     front = dance.targets_m[:, FRONT_PAWS]
     up = front > 0
     n_lifts = [
@@ -310,7 +312,7 @@ def dance_table(dance: Dance, analysis: Analysis | None, out: Path) -> Any:
     table.add_row("duration", f"{dance.duration_s:.1f} s at {dance.fps:g} Hz")
     if analysis is not None and dance.beats_s.size > 1:
         # The dance's beats: the analyser's, or a beat file's (its tempo as the analyser's).
-        tempo_bpm = 60.0 / float(np.median(np.diff(dance.beats_s)))
+        tempo_bpm = 60.0 / median_beat_period_s(dance.beats_s)
         table.add_row("tempo", f"{tempo_bpm:.1f} BPM, {dance.beats_s.size} beats")
     table.add_row("mode", dance.mode)
     table.add_row("lifts FL / FR", f"{n_lifts[0]} / {n_lifts[1]}")

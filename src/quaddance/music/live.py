@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from quaddance.errors import QuaddanceError
+from quaddance.music.analysis import median_beat_period_s
 from quaddance.music.online_beats import (
     BLOCK_S,
     SR_HZ,
@@ -177,11 +178,12 @@ class OnlineTrack:
 
     @property
     def locked_tempo_bpm(self) -> float:
-        """Tempo from the median interval of the beats after the first lock, as ``analyze``
-        takes its tempo from its beats, BPM; 0 without a lock."""
+        """Tempo from the median period of the beats after the first lock, as ``analyze``
+        takes its tempo from its beats (`analysis.median_beat_period_s`), BPM; 0 without a
+        lock."""
         lock_s = self.first_lock_s()
         after = self.beats_s[self.beats_s >= lock_s] if lock_s is not None else np.zeros(0)
-        return 60.0 / float(np.median(np.diff(after))) if after.size >= 2 else 0.0
+        return 60.0 / median_beat_period_s(after) if after.size >= 2 else 0.0
 
     def to_json_dict(self) -> dict[str, Any]:
         """The keys of ``analyze``'s JSON that an online tracker has (``tempo_bpm``:
