@@ -1,8 +1,10 @@
-"""Score the online tracker's use of BeatNet on songs outside the held-out parts.
+"""Score the online tracker's use of BeatNet, and how far a held grid follows its onsets, on
+songs outside the held-out parts.
 
 The online tracker's onset envelopes take in BeatNet's causal activation
 (`online_beats.BEATNET_WEIGHT`, the stream heard at each of `online_beats.BEATNET_STRETCHES`
-speeds). This scores a grid of the two by the tracker's beat F (+-70 ms, at its metrical level
+speeds), and a held grid moves towards its own onsets (`online_beats.HOLD_FOLLOW`). This
+scores a grid of the three by the tracker's beat F (+-70 ms, at its metrical level
 and strict) after its first lock, its lock time and its CPU share, the tracker fed each file at
 full speed as ``bench live`` feeds it (`live.track_file`), on the tuning songs of both
 real-music sets and on those of every set given with ``--also`` (e.g. the
@@ -37,21 +39,26 @@ THREE = (0.93, 1.0, 1.07)
 class Mix:
     beatnet_weight: float
     beatnet_stretches: tuple[float, ...] = (1.0,)
+    hold_follow: float = 1.0
 
     @property
     def name(self) -> str:
-        return tuning_grid.beatnet_name(self.beatnet_weight, self.beatnet_stretches)
+        name = tuning_grid.beatnet_name(self.beatnet_weight, self.beatnet_stretches)
+        return name if self.hold_follow == 1.0 else f"{name}, follow {self.hold_follow:g}"
 
     @contextlib.contextmanager
     def applied(self) -> Iterator[None]:
         """The tracker reads this mix while the block runs (its module constants)."""
-        before = online_beats.BEATNET_WEIGHT, online_beats.BEATNET_STRETCHES
-        online_beats.BEATNET_WEIGHT = self.beatnet_weight
-        online_beats.BEATNET_STRETCHES = self.beatnet_stretches
+        names = ("BEATNET_WEIGHT", "BEATNET_STRETCHES", "HOLD_FOLLOW")
+        before = [getattr(online_beats, n) for n in names]
+        mix = (self.beatnet_weight, self.beatnet_stretches, self.hold_follow)
+        for n, value in zip(names, mix, strict=True):
+            setattr(online_beats, n, value)
         try:
             yield
         finally:
-            online_beats.BEATNET_WEIGHT, online_beats.BEATNET_STRETCHES = before
+            for n, value in zip(names, before, strict=True):
+                setattr(online_beats, n, value)
 
 
 MIXES = (
@@ -61,9 +68,12 @@ MIXES = (
     Mix(0.6, THREE),
     Mix(0.5, FIVE),
     Mix(0.75, FIVE),
+    Mix(0.5, hold_follow=0.5),
+    Mix(0.5, hold_follow=0.0),
 )
-"""The grid: the default (BeatNet's share 0.5, heard once), a larger share, and the song heard
-at three and at five speeds (the offline analyser's)."""
+"""The grid: the default (BeatNet's share 0.5, heard once), a larger share, the song heard
+at three and at five speeds (the offline analyser's), and a held grid that moves half of the
+way to its onsets, or not at all."""
 
 
 def score(song: RealSong, mix: Mix) -> dict[str, Any]:

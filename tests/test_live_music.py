@@ -18,6 +18,7 @@ import soundfile as sf
 
 from benchmarks.live import LiveSong
 from quaddance.errors import InputFileError, QuaddanceError
+from quaddance.music import online_beats
 from quaddance.music.audio import load_audio
 from quaddance.music.live import ArraySource, FileSource, MicSource, track_samples
 from quaddance.music.online_beats import (
@@ -410,6 +411,42 @@ def test_tracker_keeps_the_beat_when_loud_off_beat_hats_come_in() -> None:
     assert errors.max() <= HIT_WINDOW_S
     assert all(locked for t, locked, _ in locks if hats_from_s <= t <= ref[-1])
     assert final.tempo_bpm == pytest.approx(bpm, rel=0.02)
+
+
+def _clicks_moved_under_hats(
+    bpm: float, hats_from_s: float, move_s: float, move_at_s: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """20 s of clicks, loud noise hats on the off-beats from ``hats_from_s``, and the clicks
+    after ``move_at_s`` moved ``move_s`` later (the hats stay): (audio, click times s)."""
+    clicks, ref = _click_track([(bpm, 20.0)])
+    move, at = round(move_s * SR_HZ), round(move_at_s * SR_HZ)
+    y = clicks.copy()
+    y[at:] = 0.0
+    y[at + move :] = clicks[at : len(clicks) - move]
+    rng = np.random.default_rng(0)
+    t = np.arange(round(0.08 * SR_HZ)) / SR_HZ
+    hat = 2.0 * np.diff(rng.standard_normal(len(t)) * np.exp(-t / 0.03), prepend=0.0)
+    for mid_s in ref[:-1] + 30.0 / bpm:
+        if mid_s >= hats_from_s:
+            i = round(mid_s * SR_HZ)
+            y[i : i + len(hat)] += hat[: len(y) - i].astype(np.float32)
+    return y, np.where(ref > move_at_s, ref + move / SR_HZ, ref)
+
+
+def test_a_held_grid_follows_its_onsets_when_they_move(monkeypatch: pytest.MonkeyPatch) -> None:
+    # The grid is held on the clicks while the score follows the louder off-beat hats; then
+    # the clicks come 20 ms later. The held grid moves onto them (HOLD_FOLLOW); a grid that
+    # stayed put would lose its support and follow the score onto the hats.
+    bpm, move_at_s = 120.0, 12.25
+    y, ref = _clicks_moved_under_hats(bpm, hats_from_s=8.0, move_s=0.02, move_at_s=move_at_s)
+    events, locks, _ = _track(y)
+    errors = _errors_s(events, ref, move_at_s + 2.0, ref[-1])
+    assert len(errors) >= round((ref[-1] - move_at_s - 2.0) * bpm / 60.0) - 1
+    assert errors.max() <= HIT_WINDOW_S
+    assert all(locked for t, locked, _ in locks if 8.0 <= t <= ref[-1])
+    monkeypatch.setattr(online_beats, "HOLD_FOLLOW", 0.0)
+    events, _, _ = _track(y)
+    assert np.median(_errors_s(events, ref, move_at_s + 2.0, ref[-1])) > HIT_WINDOW_S
 
 
 @pytest.mark.xfail(

@@ -95,3 +95,26 @@ def test_an_unknown_mix_is_one_line_naming_the_mixes(
     assert "beatnet 0.5 x 1, beatnet 0.75 x 0.9/1" in err
     assert two_sets == []
     assert not (tmp_path / "mix.json").exists()
+
+
+def test_a_mix_sets_how_far_a_held_grid_follows_its_onsets(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    seen: list[float] = []
+
+    def broken(path: Path):
+        seen.append(online_beats.HOLD_FOLLOW)
+        raise RuntimeError("unreadable")
+
+    monkeypatch.setattr(om.live, "track_file", broken)
+    song = RealSong("x", "x", "A", "tuning", "recording", Path("x.wav"), np.zeros(0),
+                    np.zeros(0), (120.0, 120.0), "4/4", "MIT", 1.0)  # fmt: skip
+    for follow in (0.5, 0.0):
+        with pytest.raises(RuntimeError, match="unreadable"):
+            om.score(song, om.Mix(0.5, hold_follow=follow))
+    assert seen == [0.5, 0.0]
+    assert online_beats.HOLD_FOLLOW == 1.0
+    # The grid names a mix by what differs from the tracker's defaults.
+    assert om.Mix(0.5).name == "beatnet 0.5 x 1"
+    assert om.Mix(0.5, hold_follow=0.0).name == "beatnet 0.5 x 1, follow 0"
+    assert om.Mix(0.5, hold_follow=0.5).name in [m.name for m in om.MIXES]

@@ -53,7 +53,8 @@ The tracker sees the audio block by block and never looks ahead. Per 11.6 ms fra
    that come in after the intro, a snare on the "and"), the reported beats stay on the old grid
    (an offset from the score's beats) for as long as that grid stays supported; when it loses
    the lock, or the tempo changes, the reported beats follow the score again. A held grid
-   follows its own onsets: each supported beat moves the next ones onto its onset peak.
+   follows its own onsets: each supported beat moves the next ones onto its onset peak
+   (``HOLD_FOLLOW``).
    Swing: the held grid can be the swung off-beats themselves (swung hats heard before the
    drums, or chosen after a tempo change), which stay supported. Every ``SWING_BEATS`` beats
    the onsets are folded over the reported grid, and the swing test (`swing_shift`) moves
@@ -253,6 +254,12 @@ reported grid is a jump to another pulse, which the reported beats do not follow
 quarter beat: well beyond the drift of a steady or ramping tempo (BTrack's TIGHTNESS weight
 of an interval 25 % off a period is exp(-0.5 (5 ln 0.75)^2) = 0.36, of one 4 % off 0.98), and
 no more than the half beat to an off-beat or the third of a beat to a swung one."""
+
+HOLD_FOLLOW = 1.0
+"""A held grid follows its own onsets (item 5): each supported beat moves the next ones this
+fraction of the way to its onset peak. All of the way pays for itself on the real music made by
+others outside the held-out parts (`python -m benchmarks.online_mix --also
+benchmarks/real_music_fit`; half of it, or none, fell there: ``docs/results``)."""
 
 SWING_BEATS = 6
 """While locked, the onsets of the last this many beat intervals are folded over the reported
@@ -1146,7 +1153,7 @@ class _Listener:
             if supported and self._beat_offset != 0.0:
                 # A held grid is not the score's: it follows its own onsets, moving the next
                 # beats by the frames this one's onset peak lay off it.
-                self._beat_offset += (peak - i) / self._period
+                self._beat_offset += HOLD_FOLLOW * (peak - i) / self._period
             self._support.append(supported)
             self._period_at_beats.append(self._period)
             self._beat_frames.append(frame)
