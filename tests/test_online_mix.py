@@ -14,6 +14,10 @@ import benchmarks.online_mix as om
 from benchmarks.real_music import RealSong
 from quaddance.music import online_beats
 
+UNREADABLE = RealSong("x", "x", "A", "tuning", "recording", Path("x.wav"), np.zeros(0),
+                      np.zeros(0), (120.0, 120.0), "4/4", "MIT", 1.0)  # fmt: skip
+"""A tuning song whose file the tests' stand-in tracker refuses to read."""
+
 
 @pytest.fixture
 def two_sets(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> list[tuple[str, tuple]]:
@@ -68,10 +72,8 @@ def test_a_mix_is_restored_when_its_song_fails(monkeypatch: pytest.MonkeyPatch) 
         raise RuntimeError("unreadable")
 
     monkeypatch.setattr(om.live, "track_file", broken)
-    song = RealSong("x", "x", "A", "tuning", "recording", Path("x.wav"), np.zeros(0),
-                    np.zeros(0), (120.0, 120.0), "4/4", "MIT", 1.0)  # fmt: skip
     with pytest.raises(RuntimeError, match="unreadable"):
-        om.score(song, om.Mix(0.75, om.FIVE))
+        om.score(UNREADABLE, om.Mix(0.75, om.FIVE))
     assert (online_beats.BEATNET_WEIGHT, online_beats.BEATNET_STRETCHES) == (0.5, (1.0,))
 
 
@@ -107,11 +109,9 @@ def test_a_mix_sets_how_far_a_held_grid_follows_its_onsets(
         raise RuntimeError("unreadable")
 
     monkeypatch.setattr(om.live, "track_file", broken)
-    song = RealSong("x", "x", "A", "tuning", "recording", Path("x.wav"), np.zeros(0),
-                    np.zeros(0), (120.0, 120.0), "4/4", "MIT", 1.0)  # fmt: skip
     for follow in (0.5, 0.0):
         with pytest.raises(RuntimeError, match="unreadable"):
-            om.score(song, om.Mix(0.5, hold_follow=follow))
+            om.score(UNREADABLE, om.Mix(0.5, hold_follow=follow))
     assert seen == [0.5, 0.0]
     assert online_beats.HOLD_FOLLOW == 1.0
     # The grid names a mix by what differs from the tracker's defaults.
