@@ -1,14 +1,15 @@
-"""Score the online tracker's use of BeatNet, and how far a held grid follows its onsets, on
-songs outside the held-out parts.
+"""Score the online tracker's use of BeatNet, how far a held grid follows its onsets, and
+BeatNet's vote on the phase, on songs outside the held-out parts.
 
 The online tracker's onset envelopes take in BeatNet's causal activation
 (`online_beats.BEATNET_WEIGHT`, the stream heard at each of `online_beats.BEATNET_STRETCHES`
-speeds), and a held grid moves towards its own onsets (`online_beats.HOLD_FOLLOW`). This
-scores a grid of the three by the tracker's beat F (+-70 ms, at its metrical level
-and strict) after its first lock, its lock time and its CPU share, the tracker fed each file at
-full speed as ``bench live`` feeds it (`live.track_file`), on the tuning songs of both
-real-music sets and on those of every set given with ``--also`` (e.g. the
-``benchmarks/real_music_fit`` set of commit f53a2e1). Held-out songs are never read.
+speeds), a held grid moves towards its own onsets (`online_beats.HOLD_FOLLOW`), and BeatNet's
+activation summed at the beats and at their midpoints moves the grid half a beat
+(`online_beats.OFFBEAT_VOTE_RATIO`). This scores a grid of the four by the tracker's beat F
+(+-70 ms, at its metrical level and strict) after its first lock, its lock time and its CPU
+share, the tracker fed each file at full speed as ``bench live`` feeds it (`live.track_file`),
+on the tuning songs of both real-music sets and on those of every set given with ``--also``
+(e.g. the ``benchmarks/real_music_fit`` set of commit f53a2e1). Held-out songs are never read.
 
     python -m benchmarks.online_mix [--also ROOT ...] [--mix NAME ...] [--out FILE]
 """
@@ -40,18 +41,24 @@ class Mix:
     beatnet_weight: float
     beatnet_stretches: tuple[float, ...] = (1.0,)
     hold_follow: float = 1.0
+    offbeat_vote: float = online_beats.OFFBEAT_VOTE_RATIO
+    """Infinite: no vote."""
 
     @property
     def name(self) -> str:
         name = tuning_grid.beatnet_name(self.beatnet_weight, self.beatnet_stretches)
-        return name if self.hold_follow == 1.0 else f"{name}, follow {self.hold_follow:g}"
+        if self.hold_follow != 1.0:
+            name += f", follow {self.hold_follow:g}"
+        if self.offbeat_vote != online_beats.OFFBEAT_VOTE_RATIO:
+            name += ", no vote" if np.isinf(self.offbeat_vote) else f", vote {self.offbeat_vote:g}"
+        return name
 
     @contextlib.contextmanager
     def applied(self) -> Iterator[None]:
         """The tracker reads this mix while the block runs (its module constants)."""
-        names = ("BEATNET_WEIGHT", "BEATNET_STRETCHES", "HOLD_FOLLOW")
+        names = ("BEATNET_WEIGHT", "BEATNET_STRETCHES", "HOLD_FOLLOW", "OFFBEAT_VOTE_RATIO")
         before = [getattr(online_beats, n) for n in names]
-        mix = (self.beatnet_weight, self.beatnet_stretches, self.hold_follow)
+        mix = (self.beatnet_weight, self.beatnet_stretches, self.hold_follow, self.offbeat_vote)
         for n, value in zip(names, mix, strict=True):
             setattr(online_beats, n, value)
         try:
@@ -70,10 +77,12 @@ MIXES = (
     Mix(0.75, FIVE),
     Mix(0.5, hold_follow=0.5),
     Mix(0.5, hold_follow=0.0),
+    Mix(0.5, offbeat_vote=np.inf),
+    Mix(0.5, offbeat_vote=3.0),
 )
 """The grid: the default (BeatNet's share 0.5, heard once), a larger share, the song heard
-at three and at five speeds (the offline analyser's), and a held grid that moves half of the
-way to its onsets, or not at all."""
+at three and at five speeds (the offline analyser's), a held grid that moves half of the
+way to its onsets, or not at all, and BeatNet's vote at a higher ratio, or none."""
 
 
 def score(song: RealSong, mix: Mix) -> dict[str, Any]:

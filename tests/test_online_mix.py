@@ -99,22 +99,33 @@ def test_an_unknown_mix_is_one_line_naming_the_mixes(
     assert not (tmp_path / "mix.json").exists()
 
 
-def test_a_mix_sets_how_far_a_held_grid_follows_its_onsets(
+def test_a_mix_sets_the_held_grid_s_following_and_beatnet_s_vote(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    seen: list[float] = []
+    seen: list[tuple[float, float]] = []
 
     def broken(path: Path):
-        seen.append(online_beats.HOLD_FOLLOW)
+        seen.append((online_beats.HOLD_FOLLOW, online_beats.OFFBEAT_VOTE_RATIO))
         raise RuntimeError("unreadable")
 
     monkeypatch.setattr(om.live, "track_file", broken)
-    for follow in (0.5, 0.0):
+    mixes = (
+        om.Mix(0.5, hold_follow=0.5),
+        om.Mix(0.5, hold_follow=0.0),
+        om.Mix(0.5, offbeat_vote=np.inf),
+        om.Mix(0.5, offbeat_vote=3.0),
+    )
+    for mix in mixes:
         with pytest.raises(RuntimeError, match="unreadable"):
-            om.score(UNREADABLE, om.Mix(0.5, hold_follow=follow))
-    assert seen == [0.5, 0.0]
-    assert online_beats.HOLD_FOLLOW == 1.0
+            om.score(UNREADABLE, mix)
+    assert seen == [(0.5, 2.0), (0.0, 2.0), (1.0, np.inf), (1.0, 3.0)]
+    assert (online_beats.HOLD_FOLLOW, online_beats.OFFBEAT_VOTE_RATIO) == (1.0, 2.0)
     # The grid names a mix by what differs from the tracker's defaults.
     assert om.Mix(0.5).name == "beatnet 0.5 x 1"
-    assert om.Mix(0.5, hold_follow=0.0).name == "beatnet 0.5 x 1, follow 0"
-    assert om.Mix(0.5, hold_follow=0.5).name in [m.name for m in om.MIXES]
+    assert [m.name for m in mixes] == [
+        "beatnet 0.5 x 1, follow 0.5",
+        "beatnet 0.5 x 1, follow 0",
+        "beatnet 0.5 x 1, no vote",
+        "beatnet 0.5 x 1, vote 3",
+    ]
+    assert {m.name for m in mixes} <= {m.name for m in om.MIXES}

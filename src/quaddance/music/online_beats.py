@@ -55,6 +55,11 @@ The tracker sees the audio block by block and never looks ahead. Per 11.6 ms fra
    the lock, or the tempo changes, the reported beats follow the score again. A held grid
    follows its own onsets: each supported beat moves the next ones onto its onset peak
    (``HOLD_FOLLOW``).
+   BeatNet's vote: the flux and BeatNet can put the beat half a beat apart (loud off-beat
+   chords or bass, and a lock that came on them). Since the lock, BeatNet's activation is
+   summed at the reported beats and at their midpoints; when the midpoints carry clearly more
+   (``OFFBEAT_VOTE_RATIO``), the grid moves half a beat onto them. A sum since the lock, not
+   a recent window: BeatNet itself hears some passages on the off-beat.
    Swing: the held grid can be the swung off-beats themselves (swung hats heard before the
    drums, or chosen after a tempo change), which stay supported. Every ``SWING_BEATS`` beats
    the onsets are folded over the reported grid, and the swing test (`swing_shift`) moves
@@ -260,6 +265,14 @@ HOLD_FOLLOW = 1.0
 fraction of the way to its onset peak. All of the way pays for itself on the real music made by
 others outside the held-out parts (`python -m benchmarks.online_mix --also
 benchmarks/real_music_fit`; half of it, or none, fell there: ``docs/results``)."""
+
+OFFBEAT_VOTE_RATIO = 2.0
+OFFBEAT_VOTE_BEATS = 8
+"""BeatNet's vote on the phase (item 5): while locked, its activation is summed at the reported
+beats and at their midpoints since the lock; when the midpoints' sum exceeds this ratio times the
+beats' after at least this many beats, the grid moves half a beat (and the sums swap). Chosen on
+the songs outside the held-out parts (`python -m benchmarks.online_mix --also
+benchmarks/real_music_fit`): a ratio of 3 gained less, ``docs/results``."""
 
 SWING_BEATS = 6
 """While locked, the onsets of the last this many beat intervals are folded over the reported
@@ -484,6 +497,7 @@ class _Frame(NamedTuple):
     full_flux: float  # the front end's, not normalised (steady noise has a steady flux)
     rms: float
     mel_db: np.ndarray  # (N_MELS,)
+    learned: float  # BeatNet's P(beat) + P(downbeat), not normalised
     learned_down: float  # BeatNet's P(downbeat)
 
 
@@ -651,7 +665,8 @@ class _Onsets:
         tempo = blend(tempo, learned, BEATNET_WEIGHT)
         beat = blend(beat, learned, BEATNET_WEIGHT)
         return _Frame(
-            tempo, beat, low, full, spectrum.rms, spectrum.mel_db, spectrum.learned_down
+            tempo, beat, low, full, spectrum.rms, spectrum.mel_db, spectrum.learned,
+            spectrum.learned_down,
         )  # fmt: skip
 
     def _normalise(self, key: str, x: float) -> float:
@@ -837,6 +852,9 @@ class _Listener:
         self._flux: list[float] = []  # full-band flux per frame (`_bursty`)
         self._mel: list[np.ndarray] = []  # mel spectrum per frame, dB
         self._down: list[float] = []  # BeatNet's P(downbeat) per frame
+        self._learned: list[float] = []  # BeatNet's P(beat) + P(downbeat) per frame
+        self._vote = np.zeros(2)  # BeatNet at the reported beats, at their midpoints (item 5)
+        self._vote_beats = 0  # beats in that vote
         self._pending_bar: list[int] = []  # frames of reported beats not yet in the bar count
         self._beats_counted = 0
         # Per-beat means that scale the three cues, evenly started: a first beat that misses
@@ -919,6 +937,7 @@ class _Listener:
         self._flux.append(frame.full_flux)
         self._mel.append(frame.mel_db)
         self._down.append(frame.learned_down)
+        self._learned.append(frame.learned)
         self._cum.append(cum)
         excess = len(self._cum) - self._hist_len
         if excess > 0:
@@ -929,6 +948,7 @@ class _Listener:
                 self._flux,
                 self._mel,
                 self._down,
+                self._learned,
                 self._cum,
             ):
                 del h[:excess]
@@ -1163,8 +1183,10 @@ class _Listener:
                 # The lock's grid has few reported beats, but the music before them was
                 # heard: the swing test runs on the grid carried back over it.
                 self._swing_at_lock(onset, i)
+                self._vote[:], self._vote_beats = 0.0, 0
             elif self._locked:
                 self._swing_guard(onset)
+                self._offbeat_vote(i)
 
     def _grid_frames(self, i: int, n: int) -> np.ndarray:
         """History frames of the last ``n`` beats of the current grid that ends at history
@@ -1213,6 +1235,25 @@ class _Listener:
             return
         self._shift_grid(shift)
         self._swing_tested = len(self._support)
+
+    def _offbeat_vote(self, i: int) -> None:
+        """Add BeatNet's activation at the reported beat at history frame ``i`` and at the
+        midpoint before it to the vote since the lock; move the grid half a beat when the
+        midpoints have carried ``OFFBEAT_VOTE_RATIO`` times as much over ``OFFBEAT_VOTE_BEATS``
+        beats or more (item 5)."""
+        learned = self._learned
+        r = SUPPORT_RADIUS
+        mid = round(i - self._period / 2)
+        if mid - r < 0 or i + r >= len(learned):
+            return
+        self._vote += (max(learned[i - r : i + r + 1]), max(learned[mid - r : mid + r + 1]))
+        self._vote_beats += 1
+        if self._vote_beats >= OFFBEAT_VOTE_BEATS and self._vote[1] > OFFBEAT_VOTE_RATIO * max(
+            self._vote[0], 1e-9
+        ):
+            self._shift_grid(0.5)
+            self._vote = self._vote[::-1].copy()  # the midpoints are the beats now
+            self._vote_beats = 0
 
     def _shift_grid(self, beats: float) -> None:
         """Move the reported grid ``beats`` later, the beats already predicted on it too; the
