@@ -42,7 +42,7 @@ class Mix:
     beatnet_stretches: tuple[float, ...] = (1.0,)
     hold_follow: float = 1.0
     offbeat_vote: float = online_beats.OFFBEAT_VOTE_RATIO
-    """Infinite: no vote."""
+    """Infinite (the default): no vote."""
 
     @property
     def name(self) -> str:
@@ -77,12 +77,12 @@ MIXES = (
     Mix(0.75, FIVE),
     Mix(0.5, hold_follow=0.5),
     Mix(0.5, hold_follow=0.0),
-    Mix(0.5, offbeat_vote=np.inf),
+    Mix(0.5, offbeat_vote=2.0),
     Mix(0.5, offbeat_vote=3.0),
 )
 """The grid: the default (BeatNet's share 0.5, heard once), a larger share, the song heard
 at three and at five speeds (the offline analyser's), a held grid that moves half of the
-way to its onsets, or not at all, and BeatNet's vote at a higher ratio, or none."""
+way to its onsets, or not at all, and BeatNet's vote on the phase at two ratios."""
 
 
 def score(song: RealSong, mix: Mix) -> dict[str, Any]:

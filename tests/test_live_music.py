@@ -44,10 +44,6 @@ XFAIL_BEATNET = (
     "(bench live --tracker-only: 45 -> 46 of 46 lock within 6 s), "
 )
 """Why the tests marked with it fail: kept, strict, until the tracker passes them again."""
-XFAIL_VOTE = (
-    "BeatNet's vote on the phase (OFFBEAT_VOTE_RATIO) lifts the 79 real songs outside the "
-    "held-out parts (F after the lock 0.839 -> 0.867, python -m benchmarks.online_mix), "
-)
 
 
 def _click_track(
@@ -426,21 +422,7 @@ def _clicks_under_hats(
     return y, np.where(ref > move_at_s, ref + move / SR_HZ, ref)
 
 
-@pytest.mark.parametrize(
-    "drums",
-    [
-        True,
-        pytest.param(
-            False,
-            marks=pytest.mark.xfail(
-                strict=True,
-                reason=XFAIL_VOTE + "but BeatNet hears noise hats twice as loud as bare clicks "
-                "as the beat, and its vote moves the grid onto them",
-            ),
-        ),
-    ],
-    ids=["kick-snare", "clicks"],
-)
+@pytest.mark.parametrize("drums", [False, True], ids=["clicks", "kick-snare"])
 def test_tracker_keeps_the_beat_when_loud_off_beat_hats_come_in(drums: bool) -> None:
     # The beat score follows the strongest pulse: bright hats on every off-beat, twice as loud
     # as the clicks, that come in once the tracker is locked pull it half a beat off (disco
@@ -460,9 +442,7 @@ def test_tracker_keeps_the_beat_when_loud_off_beat_hats_come_in(drums: bool) -> 
 def test_a_held_grid_follows_its_onsets_when_they_move(monkeypatch: pytest.MonkeyPatch) -> None:
     # The grid is held on the clicks while the score follows the louder off-beat hats; then
     # the clicks come 20 ms later. The held grid moves onto them (HOLD_FOLLOW); a grid that
-    # stayed put would lose its support and follow the score onto the hats. BeatNet's vote,
-    # which hears these hats as the beat (the test above), is left out.
-    monkeypatch.setattr(online_beats, "OFFBEAT_VOTE_RATIO", np.inf)
+    # stayed put would lose its support and follow the score onto the hats.
     bpm, move_at_s = 120.0, 12.25
     y, ref = _clicks_under_hats(bpm, hats_from_s=8.0, move_s=0.02, move_at_s=move_at_s)
     events, locks, _ = _track(y)
@@ -1034,17 +1014,15 @@ def test_beatnet_moves_a_grid_off_its_midpoints(
     # The flux and BeatNet can hear the beat half a beat apart (the off-beat songs of the
     # real-music sets). Clicks make the flux's pulse; a stand-in BeatNet hears the beats on
     # their midpoints, at a third of its share so that the tracker locks on the clicks. Summed
-    # since the lock, BeatNet's vote moves the grid onto its beats; without the vote the grid
-    # stays on the clicks.
+    # since the lock, BeatNet's vote (off by default) moves the grid onto its beats; without the
+    # vote the grid stays on the clicks.
     bpm = 120.0
     clicks, ref = _click_track([(bpm, 20.0)])
     mids = ref + 30.0 / bpm
-    monkeypatch.setattr(
-        online_beats.beatnet, "SpeedsActivationStream", lambda _: _BeatNetHearing(mids)
-    )
+    monkeypatch.setattr(beatnet, "SpeedsActivationStream", lambda _: _BeatNetHearing(mids))
     monkeypatch.setattr(online_beats, "BEATNET_WEIGHT", online_beats.BEATNET_WEIGHT / 3.0)
-    if not vote:
-        monkeypatch.setattr(online_beats, "OFFBEAT_VOTE_RATIO", np.inf)
+    if vote:  # off by default (OFFBEAT_VOTE_RATIO is infinite)
+        monkeypatch.setattr(online_beats, "OFFBEAT_VOTE_RATIO", 2.0)
     events, locks, _ = _track(clicks)
     assert _first_lock_s(locks) <= 6.0
     late = _errors_s(events, mids if vote else ref, 14.0, ref[-1])
