@@ -50,7 +50,7 @@ class Mix:
         if self.hold_follow != 1.0:
             name += f", follow {self.hold_follow:g}"
         if self.offbeat_vote != online_beats.OFFBEAT_VOTE_RATIO:
-            name += ", no vote" if np.isinf(self.offbeat_vote) else f", vote {self.offbeat_vote:g}"
+            name += f", vote {self.offbeat_vote:g}"
         return name
 
     @contextlib.contextmanager
