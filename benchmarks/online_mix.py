@@ -40,14 +40,14 @@ THREE = (0.93, 1.0, 1.07)
 class Mix:
     beatnet_weight: float
     beatnet_stretches: tuple[float, ...] = (1.0,)
-    hold_follow: float = 1.0
+    hold_follow: float = online_beats.HOLD_FOLLOW
     offbeat_vote: float = online_beats.OFFBEAT_VOTE_RATIO
     """Infinite (the default): no vote."""
 
     @property
     def name(self) -> str:
         name = tuning_grid.beatnet_name(self.beatnet_weight, self.beatnet_stretches)
-        if self.hold_follow != 1.0:
+        if self.hold_follow != online_beats.HOLD_FOLLOW:
             name += f", follow {self.hold_follow:g}"
         if self.offbeat_vote != online_beats.OFFBEAT_VOTE_RATIO:
             name += f", vote {self.offbeat_vote:g}"
