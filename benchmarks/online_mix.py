@@ -1,11 +1,13 @@
-"""Score the online tracker's use of BeatNet, how far a held grid follows its onsets, and
-BeatNet's vote on the phase, on songs outside the held-out parts.
+"""Score the online tracker's use of BeatNet, how far a held grid follows its onsets, how far
+the score must jump for the grid to be held, and BeatNet's vote on the phase, on songs outside
+the held-out parts.
 
 The online tracker's onset envelopes take in BeatNet's causal activation
 (`online_beats.BEATNET_WEIGHT`, the stream heard at each of `online_beats.BEATNET_STRETCHES`
 speeds), a held grid moves towards its own onsets (`online_beats.HOLD_FOLLOW`), and BeatNet's
 activation summed at the beats and at their midpoints moves the grid half a beat
-(`online_beats.OFFBEAT_VOTE_RATIO`). This scores a grid of the four by the tracker's beat F
+(`online_beats.OFFBEAT_VOTE_RATIO`); a jump of the score by `online_beats.PHASE_JUMP_BEATS`
+of a beat or more is held. This scores a grid of the five by the tracker's beat F
 (+-70 ms, at its metrical level and strict) after its first lock, its lock time and its CPU
 share, the tracker fed each file at full speed as ``bench live`` feeds it (`live.track_file`),
 on the tuning songs of both real-music sets and on those of every set given with ``--also``
@@ -43,6 +45,7 @@ class Mix:
     hold_follow: float = online_beats.HOLD_FOLLOW
     offbeat_vote: float = online_beats.OFFBEAT_VOTE_RATIO
     """Infinite (the default): no vote."""
+    phase_jump: float = online_beats.PHASE_JUMP_BEATS
 
     @property
     def name(self) -> str:
@@ -51,14 +54,22 @@ class Mix:
             name += f", follow {self.hold_follow:g}"
         if self.offbeat_vote != online_beats.OFFBEAT_VOTE_RATIO:
             name += f", vote {self.offbeat_vote:g}"
+        if self.phase_jump != online_beats.PHASE_JUMP_BEATS:
+            name += f", jump {self.phase_jump:g}"
         return name
 
     @contextlib.contextmanager
     def applied(self) -> Iterator[None]:
         """The tracker reads this mix while the block runs (its module constants)."""
-        names = ("BEATNET_WEIGHT", "BEATNET_STRETCHES", "HOLD_FOLLOW", "OFFBEAT_VOTE_RATIO")
+        names = (
+            "BEATNET_WEIGHT", "BEATNET_STRETCHES", "HOLD_FOLLOW", "OFFBEAT_VOTE_RATIO",
+            "PHASE_JUMP_BEATS",
+        )  # fmt: skip
         before = [getattr(online_beats, n) for n in names]
-        mix = (self.beatnet_weight, self.beatnet_stretches, self.hold_follow, self.offbeat_vote)
+        mix = (
+            self.beatnet_weight, self.beatnet_stretches, self.hold_follow, self.offbeat_vote,
+            self.phase_jump,
+        )  # fmt: skip
         for n, value in zip(names, mix, strict=True):
             setattr(online_beats, n, value)
         try:
@@ -79,10 +90,14 @@ MIXES = (
     Mix(0.5, hold_follow=0.0),
     Mix(0.5, offbeat_vote=2.0),
     Mix(0.5, offbeat_vote=3.0),
+    Mix(0.5, phase_jump=0.25),
+    Mix(0.5, phase_jump=0.2),
+    Mix(0.5, phase_jump=0.1),
 )
 """The grid: the default (BeatNet's share 0.5, heard once), a larger share, the song heard
 at three and at five speeds (the offline analyser's), a held grid that moves half of the
-way to its onsets, or not at all, and BeatNet's vote on the phase at two ratios."""
+way to its onsets, or not at all, BeatNet's vote on the phase at two ratios, and other
+jumps of the score that the grid holds against."""
 
 
 def score(song: RealSong, mix: Mix) -> dict[str, Any]:

@@ -99,13 +99,14 @@ def test_an_unknown_mix_is_one_line_naming_the_mixes(
     assert not (tmp_path / "mix.json").exists()
 
 
-def test_a_mix_sets_the_held_grid_s_following_and_beatnet_s_vote(
+def test_a_mix_sets_the_held_grid_s_following_its_jump_and_beatnet_s_vote(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    seen: list[tuple[float, float]] = []
+    seen: list[tuple[float, float, float]] = []
 
     def broken(path: Path):
-        seen.append((online_beats.HOLD_FOLLOW, online_beats.OFFBEAT_VOTE_RATIO))
+        ob = online_beats
+        seen.append((ob.HOLD_FOLLOW, ob.OFFBEAT_VOTE_RATIO, ob.PHASE_JUMP_BEATS))
         raise RuntimeError("unreadable")
 
     monkeypatch.setattr(om.live, "track_file", broken)
@@ -114,13 +115,18 @@ def test_a_mix_sets_the_held_grid_s_following_and_beatnet_s_vote(
         om.Mix(0.5, hold_follow=0.0),
         om.Mix(0.5, offbeat_vote=2.0),
         om.Mix(0.5, offbeat_vote=3.0),
+        om.Mix(0.5, phase_jump=0.25),
     )
     for mix in mixes:
         with pytest.raises(RuntimeError, match="unreadable"):
             om.score(UNREADABLE, mix)
-    assert seen == [(0.5, np.inf), (0.0, np.inf), (1.0, 2.0), (1.0, 3.0)]
+    assert seen == [
+        (0.5, np.inf, 0.15), (0.0, np.inf, 0.15), (1.0, 2.0, 0.15), (1.0, 3.0, 0.15),
+        (1.0, np.inf, 0.25),
+    ]  # fmt: skip
     assert online_beats.HOLD_FOLLOW == 1.0
     assert np.isinf(online_beats.OFFBEAT_VOTE_RATIO)
+    assert online_beats.PHASE_JUMP_BEATS == 0.15
     # The grid names a mix by what differs from the tracker's defaults.
     assert om.Mix(0.5).name == "beatnet 0.5 x 1"
     assert [m.name for m in mixes] == [
@@ -128,5 +134,6 @@ def test_a_mix_sets_the_held_grid_s_following_and_beatnet_s_vote(
         "beatnet 0.5 x 1, follow 0",
         "beatnet 0.5 x 1, vote 2",
         "beatnet 0.5 x 1, vote 3",
+        "beatnet 0.5 x 1, jump 0.25",
     ]
     assert {m.name for m in mixes} <= {m.name for m in om.MIXES}
