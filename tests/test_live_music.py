@@ -439,6 +439,30 @@ def test_tracker_keeps_the_beat_when_loud_off_beat_hats_come_in(drums: bool) -> 
     assert final.tempo_bpm == pytest.approx(bpm, rel=0.02)
 
 
+@pytest.mark.parametrize(
+    ("jump_beats", "held"), [(0.1, False), (-0.1, False), (0.2, True), (-0.24, True), (0.5, True)]
+)
+def test_a_locked_grid_holds_against_jumps_of_the_score_from_0_15_of_a_beat(
+    jump_beats: float, held: bool
+) -> None:
+    """A step of the score under `PHASE_JUMP_BEATS` is drift, which the reported beats follow;
+    a larger one, down to the quarter beat that is the music's off-beat under a grid at half its
+    tempo, is a jump to another pulse: the next reported beat stays one period after the last."""
+    listener = online_beats._Listener(online_beats._Features(), even_start=False)
+    period = 40.0  # frames: 0.46 s, 129 BPM
+    beat_period_s = period * online_beats.FRAME_S
+    listener._locked, listener._period, listener._phase_free = True, period, False
+    listener._scheduled = [10.0]  # the last reported beat, s
+    score_beat_s = 10.0 + (1.0 + jump_beats) * beat_period_s
+    listener._hold_phase(score_beat_s)
+    reported_s = score_beat_s + listener._beat_offset * beat_period_s
+    if held:
+        assert reported_s == pytest.approx(10.0 + beat_period_s)
+    else:
+        assert listener._beat_offset == 0.0
+        assert reported_s == pytest.approx(score_beat_s)
+
+
 def test_a_held_grid_follows_its_onsets_when_they_move(monkeypatch: pytest.MonkeyPatch) -> None:
     # The grid is held on the clicks while the score follows the louder off-beat hats; then
     # the clicks come 20 ms later. The held grid moves onto them (HOLD_FOLLOW); a grid that
