@@ -38,6 +38,18 @@ FIVE = analysis.AnalysisConfig().beatnet_stretches
 THREE = (0.93, 1.0, 1.07)
 
 
+CONSTANTS = {
+    "beatnet_weight": "BEATNET_WEIGHT",
+    "beatnet_stretches": "BEATNET_STRETCHES",
+    "hold_follow": "HOLD_FOLLOW",
+    "offbeat_vote": "OFFBEAT_VOTE_RATIO",
+    "phase_jump": "PHASE_JUMP_BEATS",
+}
+"""Each field of a `Mix` and the online tracker's module constant it sets."""
+LABELS = {"hold_follow": "follow", "offbeat_vote": "vote", "phase_jump": "jump"}
+"""How a mix's name says a field that differs from the tracker's default."""
+
+
 @dataclass(frozen=True)
 class Mix:
     beatnet_weight: float
@@ -50,33 +62,23 @@ class Mix:
     @property
     def name(self) -> str:
         name = tuning_grid.beatnet_name(self.beatnet_weight, self.beatnet_stretches)
-        if self.hold_follow != online_beats.HOLD_FOLLOW:
-            name += f", follow {self.hold_follow:g}"
-        if self.offbeat_vote != online_beats.OFFBEAT_VOTE_RATIO:
-            name += f", vote {self.offbeat_vote:g}"
-        if self.phase_jump != online_beats.PHASE_JUMP_BEATS:
-            name += f", jump {self.phase_jump:g}"
+        for field, label in LABELS.items():
+            value = getattr(self, field)
+            if value != getattr(online_beats, CONSTANTS[field]):
+                name += f", {label} {value:g}"
         return name
 
     @contextlib.contextmanager
     def applied(self) -> Iterator[None]:
         """The tracker reads this mix while the block runs (its module constants)."""
-        names = (
-            "BEATNET_WEIGHT", "BEATNET_STRETCHES", "HOLD_FOLLOW", "OFFBEAT_VOTE_RATIO",
-            "PHASE_JUMP_BEATS",
-        )  # fmt: skip
-        before = [getattr(online_beats, n) for n in names]
-        mix = (
-            self.beatnet_weight, self.beatnet_stretches, self.hold_follow, self.offbeat_vote,
-            self.phase_jump,
-        )  # fmt: skip
-        for n, value in zip(names, mix, strict=True):
-            setattr(online_beats, n, value)
+        before = {c: getattr(online_beats, c) for c in CONSTANTS.values()}
+        for field, constant in CONSTANTS.items():
+            setattr(online_beats, constant, getattr(self, field))
         try:
             yield
         finally:
-            for n, value in zip(names, before, strict=True):
-                setattr(online_beats, n, value)
+            for constant, value in before.items():
+                setattr(online_beats, constant, value)
 
 
 MIXES = (
