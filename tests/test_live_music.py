@@ -322,6 +322,12 @@ def test_analyze_online_writes_what_the_live_tracker_reports(tmp_path: Path) -> 
     assert data["duration_s"] == pytest.approx(len(y) / SR_HZ, abs=BLOCK_S)
     errors = _errors_s(list(track.beats), ref, data["lock_s"], ref[-1])
     assert len(errors) >= 8 and errors.max() <= HIT_WINDOW_S
+    # The README's route for dancing to these beats: the file is a valid `--beats` file.
+    from quaddance.music.beat_file import read_beats
+
+    beats = read_beats(out)
+    assert list(beats.beats_s) == data["beats_s"]
+    assert list(beats.downbeats_s) == data["downbeats_s"]
 
     late = track_file(path, start_s=4.0)
     alone = track_samples(y[4 * SR_HZ :], song_start=False)
