@@ -26,7 +26,7 @@ from benchmarks.beats import (
     write_midi,
 )
 from quaddance.cli import app
-from quaddance.errors import InputFileError, QuaddanceError
+from quaddance.errors import InputFileError, OutputFileError, QuaddanceError
 from quaddance.music.analysis import (
     Analysis,
     AnalysisConfig,
@@ -35,6 +35,14 @@ from quaddance.music.analysis import (
     offbeat_harmony,
 )
 from quaddance.music.audio import load_audio
+from quaddance.music.click import (
+    CLICK_HZ,
+    CLICK_S,
+    DOWNBEAT_CLICK_HZ,
+    SONG_PEAK,
+    click_track,
+    with_clicks,
+)
 from quaddance.music.synth import DEMO_TEMPO_BPM, render_song
 
 SR = 22050
@@ -292,6 +300,80 @@ def test_demo_song_cli_is_deterministic(demo_song: tuple[Path, object], tmp_path
     assert result.exit_code == 0, result.output
     assert out.read_bytes() == path.read_bytes()
     assert sf.info(str(out)).duration == pytest.approx(30.0, abs=0.01)
+
+
+def _click_pitch_hz(x: np.ndarray, start: int, sr: int) -> float:
+    seg = x[start : start + round(CLICK_S * sr)]
+    spectrum = np.abs(np.fft.rfft(seg, n=8 * len(seg)))
+    return float(np.fft.rfftfreq(8 * len(seg), 1.0 / sr)[np.argmax(spectrum)])
+
+
+def test_click_track_starts_each_click_at_its_beat_and_marks_the_downbeats() -> None:
+    n = 3 * SR
+    beats_s = [-0.1, 0.5, 1.0, 1.5, 2.0, 2.99, 3.5]  # the first and last lie outside the song
+    x = click_track(n, SR, beats_s, downbeats_s=[0.5, 1.505])
+    inside = [b for b in beats_s if 0 <= b < 3.0]
+    for b in inside:
+        start = round(b * SR)
+        assert np.all(x[start - 20 : start] == 0.0), b  # silent up to the beat
+        assert np.abs(x[start : start + 10]).max() > 0.3, b  # loud at once
+    assert _click_pitch_hz(x, round(0.5 * SR), SR) == pytest.approx(DOWNBEAT_CLICK_HZ, rel=0.02)
+    assert _click_pitch_hz(x, round(1.5 * SR), SR) == pytest.approx(DOWNBEAT_CLICK_HZ, rel=0.02)
+    for b in (1.0, 2.0):
+        assert _click_pitch_hz(x, round(b * SR), SR) == pytest.approx(CLICK_HZ, rel=0.02)
+    # Sound only in the clicks that lie inside the song; the one at 2.99 s is cut at the end.
+    loud = np.flatnonzero(np.abs(x) > 1e-3)
+    starts = [round(b * SR) for b in inside]
+    assert all(
+        any(0 <= i - s < CLICK_S * SR for s in starts) for i in loud[:: max(1, len(loud) // 500)]
+    )
+    assert len(x) == n and np.abs(x).max() <= 1.0
+
+
+def test_with_clicks_scales_the_song_and_never_clips() -> None:
+    rng = np.random.default_rng(0)
+    y = 5.0 * rng.standard_normal(4 * SR).astype(np.float32)  # a float master far above 1
+    beats_s = np.arange(0.0, 4.0, 0.2)  # as dense as beats may be
+    mixed = with_clicks(y, SR, beats_s, beats_s[::4])
+    assert np.abs(mixed).max() <= 1.0
+    bare = with_clicks(y, SR, [])
+    assert np.abs(bare).max() == pytest.approx(SONG_PEAK, rel=1e-5)
+    assert np.allclose(
+        mixed - bare, (1.0 - SONG_PEAK) * click_track(len(y), SR, beats_s, beats_s[::4]), atol=1e-6
+    )
+
+
+@pytest.mark.parametrize("tracker", [[], ["--online"]], ids=["offline", "online"])
+def test_analyze_click_writes_the_song_with_its_beats_clicked(
+    demo_song: tuple[Path, object], tmp_path: Path, tracker: list[str]
+) -> None:
+    path, _ = demo_song
+    out, click = tmp_path / "a.json", tmp_path / "click.wav"
+    result = CliRunner().invoke(
+        app, ["analyze", str(path), *tracker, "-o", str(out), "--click", str(click)]
+    )
+    assert result.exit_code == 0, result.output
+    data = json.loads(out.read_text())
+    written, sr = sf.read(str(click), dtype="float32")
+    y, sr_song = load_audio(path)
+    assert sr == sr_song and written.shape == y.shape
+    expected = with_clicks(y, sr, data["beats_s"], data["downbeats_s"])
+    assert np.abs(written - expected).max() < 2.0 / 2**15  # 16-bit wav
+    assert len(data["beats_s"]) > 40 and len(data["downbeats_s"]) > 10
+
+
+def test_audio_outputs_refuse_a_suffix_they_cannot_write(
+    demo_song: tuple[Path, object], tmp_path: Path
+) -> None:
+    path, _ = demo_song
+    out = tmp_path / "a.json"
+    bad = CliRunner().invoke(
+        app, ["analyze", str(path), "-o", str(out), "--click", str(tmp_path / "c.mp3")]
+    )
+    assert isinstance(bad.exception, OutputFileError) and "c.mp3" in str(bad.exception)
+    assert not out.exists()  # refused before the analysis, not after it
+    demo = CliRunner().invoke(app, ["demo-song", str(tmp_path / "demo")])
+    assert isinstance(demo.exception, OutputFileError) and "no suffix" in str(demo.exception)
 
 
 # --- the benchmark's songs --------------------------------------------------------------------

@@ -1,4 +1,5 @@
-"""Decoding audio files into mono float32 arrays, with clear errors for unusable files.
+"""Decoding audio files into mono float32 arrays, with clear errors for unusable files, and
+writing audio (`write_audio`).
 
 Every number a file's header gives (sample rate, channels, length) is checked before it is
 used, and decoding is bounded: a file longer than `MAX_SONG_S` is refused from its header
@@ -19,13 +20,16 @@ from pathlib import Path
 
 import numpy as np
 
-from quaddance.errors import InputFileError
+from quaddance.errors import InputFileError, OutputFileError
 
 DEFAULT_SR = 22050
 """Analysis sample rate, Hz (librosa's default: enough for beats, 2x cheaper than 44.1 kHz)."""
 
 SUPPORTED_SUFFIXES = (".wav", ".flac", ".ogg", ".oga", ".mp3", ".aif", ".aiff")
 """File types we decode; libsndfile >= 1.1 (bundled with soundfile) reads all of them."""
+
+WRITABLE_SUFFIXES = (".wav", ".flac", ".ogg")
+"""File types `write_audio` writes (libsndfile writes them with no extra codec)."""
 
 SILENCE_PEAK = 1e-4
 """A file whose peak amplitude is below this (-80 dBFS) is treated as silent."""
@@ -227,3 +231,32 @@ def _decode(
         # normalised, so that analysis sees ordinary levels and y stays in [-1, 1].
         y /= np.float32(out_peak)
     return np.ascontiguousarray(y, dtype=np.float32)
+
+
+def check_audio_output(path: str | Path) -> Path:
+    """``path`` checked as `quaddance.fileio.check_output_file` checks it, and for a suffix in
+    `WRITABLE_SUFFIXES`; call it before the work that makes the audio.
+
+    Raises:
+        OutputFileError: the suffix is not one `write_audio` writes, or the path cannot be
+            written.
+    """
+    from quaddance.fileio import check_output_file
+
+    path = Path(path)
+    if path.suffix.lower() not in WRITABLE_SUFFIXES:
+        suffix = f"as {path.suffix}" if path.suffix else "with no suffix"
+        raise OutputFileError(path, f"cannot write audio {suffix}: name it .wav, .flac or .ogg")
+    return check_output_file(path)
+
+
+def write_audio(path: str | Path, y: np.ndarray, sr: int) -> None:
+    """Write (n,) samples in [-1, 1] at ``sr`` Hz to ``path`` atomically, in the format its
+    suffix names (`WRITABLE_SUFFIXES`; `check_audio_output` says why not)."""
+    import soundfile as sf
+
+    from quaddance.fileio import atomic_path
+
+    check_audio_output(path)
+    with atomic_path(path) as tmp:
+        sf.write(str(tmp), np.asarray(y, dtype=np.float32), sr)

@@ -270,11 +270,8 @@ def write_demo_song(path: str | Path, sr: int = 22050) -> SongTruth:
 
     The song is deterministic: the same file every time. Returns its exact grid.
     """
-    import soundfile as sf
-
-    from quaddance.fileio import atomic_path
+    from quaddance.music.audio import write_audio
 
     y, truth = demo_song(sr)
-    with atomic_path(path) as tmp:
-        sf.write(str(tmp), y, sr)
+    write_audio(path, y, sr)
     return truth
