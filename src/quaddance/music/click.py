@@ -8,6 +8,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from quaddance.music.beat_file import DOWNBEAT_ON_BEAT_S
+
 CLICK_HZ = 1000.0
 """Pitch of a beat's click, Hz (above most bass and drums, where the ear finds it at once)."""
 
@@ -25,9 +27,6 @@ SONG_PEAK = 0.6
 """Peak of the song in the mix; the clicks take the rest of full scale (0.4), so the mix never
 clips."""
 
-DOWNBEAT_ON_BEAT_S = 0.01
-"""A beat within this of a downbeat gets the downbeat's click, s."""
-
 
 def click_track(
     n_samples: int, sr: int, beats_s: Sequence[float], downbeats_s: Sequence[float] = ()
@@ -42,7 +41,7 @@ def click_track(
         hz: (np.sin(2.0 * np.pi * hz * t_s) * fade).astype(np.float32)
         for hz in (CLICK_HZ, DOWNBEAT_CLICK_HZ)
     }
-    down = np.sort(np.asarray(downbeats_s, dtype=float))
+    down = np.asarray(downbeats_s, dtype=float)
     for beat_s in np.asarray(beats_s, dtype=float):
         start = round(beat_s * sr)
         if not 0 <= start < n_samples:
