@@ -95,6 +95,7 @@ BAD = [
     ("text.json", '{"beats_s": [0.5, "1.0", 1.5, 2.0]}', "beats_s[1] ('1.0') is not a number"),
     ("down.json", '{"beats_s": [0.5, 1, 1.5, 2], "downbeats_s": [1.2]}', "downbeat 1.200 s"),
     ("latin1.txt", b"0.5\n\xe9\n", "not a text file"),
+    ("comma.txt", "0,5\n1,5\n2,5\n3,5\n", "line '0,5' reads as 0 s: write times with a decimal"),
 ]
 
 

@@ -59,6 +59,9 @@ def test_dance_writes_video_plot_and_complete_metrics(short_song, tmp_path):
 
 
 def test_dance_cli_without_video(short_song, tmp_path):
+    # A video of an earlier run in the folder is kept, and named as not this run's.
+    older = tmp_path / "dance.mp4"
+    older.write_bytes(b"an earlier run's video")
     proc = subprocess.run(
         [
             sys.executable,
@@ -78,7 +81,9 @@ def test_dance_cli_without_video(short_song, tmp_path):
     # It ends without the interpreter's teardown (`cli._exit_without_teardown`): nothing
     # may be left for multiprocessing's resource tracker to warn about.
     assert "Warning" not in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
-    assert not (tmp_path / "dance.mp4").exists()
+    assert older.read_bytes() == b"an earlier run's video"
+    notes = [line for line in proc.stderr.splitlines() if line.startswith("note:")]
+    assert notes == [f"note: {older} is from an earlier run (this one did not write it)"]
     metrics = json.loads((tmp_path / "metrics.json").read_text())
     assert metrics["realtime_factor_render"] is None
     assert metrics["realtime_factor_sim"] > 0  # a rate; its speed is benchmarked, not tested

@@ -241,6 +241,90 @@ def test_cli_refuses_output_paths_before_the_work(tmp_path) -> None:
     assert (tmp_path / "fifo.npz").is_fifo() and (tmp_path / "afile").read_text() == "x"
 
 
+def test_an_output_never_replaces_an_input_or_another_output(tmp_path) -> None:
+    runner = CliRunner()
+    song = tmp_path / "song.wav"
+    sf.write(song, _tone(3.0), SR)
+    before = song.read_bytes()
+    (tmp_path / "link.wav").symlink_to(song)
+    beats = tmp_path / "beats.txt"
+    beats.write_text("0.5\n1.0\n1.5\n2.0\n")
+    cases = [
+        (["analyze", str(song), "-o", str(song)], "is also the input (SONG)"),
+        (["analyze", str(song), "--click", str(tmp_path / "link.wav")], "input (SONG)"),
+        (
+            [
+                "analyze",
+                str(song),
+                "-o",
+                str(tmp_path / "x.wav"),
+                "--click",
+                str(tmp_path / "x.wav"),
+            ],
+            "is given for both --out and --click",
+        ),
+        (["choreograph", str(song), "-o", str(song)], "input (SONG); writing --out"),
+        (["choreograph", str(song), "--beats", str(beats), "-o", str(beats)], "input (--beats)"),
+    ]
+    for args, words in cases:
+        result = runner.invoke(app, args)
+        assert isinstance(result.exception, OutputFileError), (args, result.output)
+        assert words in str(result.exception), str(result.exception)
+    assert song.read_bytes() == before and beats.read_text().startswith("0.5")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["beats.txt", "link.wav", "song.wav"]
+
+
+def test_an_unwritable_folder_is_refused_before_any_output(tmp_path, monkeypatch) -> None:
+    """`analyze -o OUT --click CLICK` where CLICK's folder cannot be written: nothing is
+    written, not OUT either. (Root may write anywhere, so the folder's refusal is simulated.)"""
+    song = tmp_path / "song.wav"
+    sf.write(song, _tone(3.0), SR)
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    real_access = os.access
+    monkeypatch.setattr(
+        fileio.os, "access", lambda p, mode: Path(p) != locked and real_access(p, mode)
+    )
+    out = tmp_path / "a.json"
+    result = CliRunner().invoke(
+        app, ["analyze", str(song), "-o", str(out), "--click", str(locked / "c.wav")]
+    )
+    assert isinstance(result.exception, OutputFileError), result.output
+    assert str(result.exception) == f"{locked / 'c.wav'}: cannot write in the folder {locked}"
+    assert not out.exists() and list(locked.iterdir()) == []
+
+
+def test_a_folder_given_as_an_input_file_is_called_a_folder(tmp_path) -> None:
+    folder = tmp_path / "song.wav"
+    folder.mkdir()
+    song = tmp_path / "real.wav"
+    sf.write(song, _tone(3.0), SR)
+    cases = [
+        ["dance", str(folder), "--no-video", "--out", str(tmp_path / "o")],
+        ["choreograph", str(folder), "-o", str(tmp_path / "d.npz")],
+        ["choreograph", str(song), "--moves", str(folder), "-o", str(tmp_path / "d.npz")],
+        ["choreograph", str(song), "--beats", str(folder), "-o", str(tmp_path / "d.npz")],
+        ["dance", "--policy", str(folder), str(song), "--out", str(tmp_path / "o")],
+    ]
+    for args in cases:
+        result = CliRunner().invoke(app, args)
+        assert isinstance(result.exception, InputFileError), (args, result.output)
+        assert str(result.exception) == f"{folder}: is a folder, not a file", args
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["real.wav", "song.wav"]
+
+
+def test_a_refused_dance_leaves_no_empty_output_folder(tmp_path) -> None:
+    song = tmp_path / "silent.wav"
+    sf.write(song, np.zeros(3 * SR, dtype=np.float32), SR)
+    kept = tmp_path / "kept"
+    kept.mkdir()
+    for out in (tmp_path / "new", kept):
+        result = CliRunner().invoke(app, ["dance", str(song), "--no-video", "--out", str(out)])
+        assert isinstance(result.exception, InputFileError), result.output
+        assert "silent" in str(result.exception)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["kept", "silent.wav"]
+
+
 def test_error_line_is_one_short_line() -> None:
     line = one_line_error(InputFileError("f.wav", "bad\nvalue " + "x" * 5000))
     assert "\n" not in line and len(line) <= 400 and line.startswith("quaddance: error: f.wav")
@@ -437,6 +521,35 @@ def test_out_of_range_options_are_usage_errors(args, option) -> None:
     result = CliRunner().invoke(app, args)
     assert result.exit_code == 2 and option in result.output, result.output
     assert result.exception is None or isinstance(result.exception, SystemExit)
+
+
+@pytest.mark.parametrize(
+    ("args", "words"),
+    [
+        (["dance", "--mode", "bogus"], "dance: Invalid value: --mode must be one of"),
+        (["analyze"], "analyze: Missing argument 'song'"),
+        (["dance", "s.wav", "--seed", "abc"], "dance: Invalid value for '--seed'"),
+        (["bench", "reach", "--bogus"], "bench reach: No such option: --bogus"),
+        (["bogus"], "No such command 'bogus'"),
+    ],
+)
+def test_the_console_command_reports_a_usage_error_in_one_line(args, words) -> None:
+    """The installed command (not CliRunner): a bad option or argument is one line
+    ``quaddance: error: ...`` with exit status 2, as every other bad input is."""
+    proc = subprocess.run(
+        [sys.executable, "-m", "quaddance.cli", *args], capture_output=True, text=True, timeout=60
+    )
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1, proc.stderr
+    assert lines[0].startswith("quaddance: error: ") and words in lines[0], lines[0]
+    assert lines[0].endswith("--help)") and proc.stdout == ""
+
+
+def test_the_bare_console_command_prints_its_help() -> None:
+    proc = subprocess.run(
+        [sys.executable, "-m", "quaddance.cli"], capture_output=True, text=True, timeout=60
+    )
+    assert proc.returncode == 2 and "Usage: quaddance" in proc.stdout and "dance" in proc.stdout
 
 
 def _commands(group, prefix: tuple[str, ...] = ()):

@@ -230,6 +230,27 @@ def test_load_audio_formats(tmp_path: Path, fmt: str) -> None:
     assert np.max(np.abs(loaded)) == pytest.approx(np.max(np.abs(expected)), rel=0.15)
 
 
+def test_truncated_mp3_is_read_at_its_real_length(tmp_path: Path) -> None:
+    """A cut mp3 keeps a header that claims the whole song; libsndfile's block reader then
+    repeated its last block up to that length. The decoded length must be the real one."""
+    if "MP3" not in sf.available_formats():
+        pytest.skip(f"this libsndfile ({sf.__libsndfile_version__}) cannot write mp3")
+    y, _ = render_song(120.0, 20.0, seed=3, sr=44100)
+    whole = tmp_path / "whole.mp3"
+    sf.write(str(whole), np.stack([y, y], axis=1), 44100, format="MP3")
+    data = whole.read_bytes()
+    cut = tmp_path / "cut.mp3"
+    cut.write_bytes(data[: len(data) // 4])
+    assert sf.info(str(cut)).duration > 15.0  # the header still claims the whole song
+    loaded, sr = load_audio(cut, sr=SR)
+    assert 3.0 < loaded.size / sr < 7.0
+    np.testing.assert_allclose(loaded, load_audio(whole, sr=SR)[0][: loaded.size], atol=0.05)
+    tiny = tmp_path / "tiny.mp3"
+    tiny.write_bytes(data[:3000])
+    with pytest.raises(InputFileError, match=r"tiny.mp3: is too short: 0\.\d+ s"):
+        load_audio(tiny)
+
+
 def _write(path: Path, y: np.ndarray) -> Path:
     sf.write(str(path), y, SR)
     return path

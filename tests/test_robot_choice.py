@@ -277,3 +277,24 @@ def test_reports_name_a_shipped_policy_by_its_file_not_this_machines_path(tmp_pa
     assert policy_label(None) == "shipped (go1_dance.onnx)"
     mine = tmp_path / "go1_dance.onnx"  # the same name elsewhere is the user's own
     assert policy_label(mine) == str(mine)
+
+
+@pytest.mark.parametrize("robot", [GO1, GO2])
+def test_choreograph_makes_the_dance_that_dance_performs(monkeypatch, capsys, song_3s, tmp_path,
+                                                         robot):  # fmt: skip
+    """Without --max-height, `choreograph` keeps to the range of the robot's shipped policy,
+    as `dance` does: its dance.npz is the dance that `dance` performs."""
+    monkeypatch.setattr("quaddance.cli.dance.exit_without_teardown", lambda: None)
+    made = tmp_path / "made.npz"
+    args = ("--robot", robot.name, "--seed", "4")
+    code, err = _quaddance(monkeypatch, capsys, "choreograph", song_3s, *args, "-o", made)
+    assert code == 0, err
+    code, err = _quaddance(monkeypatch, capsys, "dance", song_3s, *args, "--no-video",
+                           "--out", tmp_path / "danced")  # fmt: skip
+    assert code == 0, err
+    made, danced = load_dance(made), load_dance(tmp_path / "danced" / "dance.npz")
+    # The same dance, to float rounding: `dance` composes it in its helper process.
+    np.testing.assert_allclose(made.targets_m, danced.targets_m, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(made.body_targets, danced.body_targets, rtol=0, atol=1e-6)
+    trained = OnnxPolicy.load(shipped_policy_path(robot)).spec.targets_max_height_m
+    assert trained < robot.max_paw_height_m and made.targets_m.max() <= trained + 1e-6

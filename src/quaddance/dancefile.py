@@ -42,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from quaddance.errors import InputFileError
+from quaddance.errors import InputFileError, not_a_file
 from quaddance.fileio import atomic_path
 from quaddance.layout import MODES, N_BODY, N_PAWS
 from quaddance.robots import GO1, ROBOTS, RobotCfg, get_robot
@@ -174,7 +174,7 @@ def load_dance(path: str | Path, robot: RobotCfg | None = None) -> Dance:
     ``robot``, that the dance was made for another robot (`Dance.require_robot`)."""
     path = Path(path)
     if not path.is_file():
-        raise InputFileError(path, "no such file")
+        raise not_a_file(path)
     if path.stat().st_size > MAX_FILE_BYTES:
         raise InputFileError(path, f"is {path.stat().st_size} bytes, too large for a dance file")
     try:

@@ -21,6 +21,17 @@ class InputFileError(QuaddanceError):
         super().__init__(f"{self.path}: {problem}")
 
 
+def not_a_file(path: str | Path) -> InputFileError:
+    """The error for an input ``path`` that is not a regular file: it is missing, a folder, or
+    another kind of file (a FIFO, a device)."""
+    path = Path(path)
+    if not path.exists():
+        return InputFileError(path, "no such file")
+    if path.is_dir():
+        return InputFileError(path, "is a folder, not a file")
+    return InputFileError(path, "is not a regular file")
+
+
 class OutputFileError(QuaddanceError):
     """An output path cannot be written (it is a device, a folder where a file goes, the disk
     is full, ...); the message names the path and the problem."""

@@ -67,12 +67,48 @@ def check_output_file(path: str | Path) -> Path:
 
 
 def _check_parent(folder: Path, named: Path) -> None:
-    """The first existing ancestor of ``folder`` must be a folder (we create the rest)."""
+    """The first existing ancestor of ``folder`` must be a folder we may write in (we create
+    the rest, and the atomic rename writes in the folder, not the file)."""
     for parent in (folder, *folder.parents):
         if parent.exists():
             if not parent.is_dir():
                 raise OutputFileError(named, f"{parent} is a file, not a folder")
+            if not os.access(parent, os.W_OK | os.X_OK):
+                raise OutputFileError(named, f"cannot write in the folder {parent}")
             return
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """Whether ``a`` and ``b`` name one file (through links), existing or not."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one of them does not exist (yet)
+        return Path(os.path.realpath(a)) == Path(os.path.realpath(b))
+
+
+def check_distinct(outputs: dict[str, Path], inputs: dict[str, Path | None]) -> None:
+    """Refuse an output that is one of the inputs, or two outputs that are one file: the
+    input would be replaced, or one output would be lost under the other.
+
+    Args:
+        outputs: each output path by the option that names it (for the message).
+        inputs: each input path by its option; None where not given.
+
+    Raises:
+        OutputFileError: naming the output and what it collides with.
+    """
+    given = {what: path for what, path in inputs.items() if path is not None}
+    seen: dict[str, Path] = {}
+    for what, out in outputs.items():
+        for in_what, path in given.items():
+            if _same_file(out, path):
+                raise OutputFileError(
+                    out, f"is also the input ({in_what}); writing {what} would replace it"
+                )
+        for other, path in seen.items():
+            if _same_file(out, path):
+                raise OutputFileError(out, f"is given for both {other} and {what}")
+        seen[what] = out
 
 
 def ensure_dir(path: str | Path) -> Path:
@@ -96,6 +132,12 @@ def ensure_dir(path: str | Path) -> Path:
     except OSError as err:
         raise OutputFileError(path, f"cannot create the folder ({err.strerror or err})") from None
     return path
+
+
+def remove_empty_dir(path: str | Path) -> None:
+    """Remove the folder ``path`` if it exists and is empty; leave it otherwise."""
+    with contextlib.suppress(OSError):
+        Path(path).rmdir()
 
 
 @contextlib.contextmanager

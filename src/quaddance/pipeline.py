@@ -25,8 +25,8 @@ from quaddance.choreo.body import MoveSet, choreograph_body
 from quaddance.choreo.choreographer import STYLES, choreograph
 from quaddance.choreo.grid import MusicGrid, synthetic_grid
 from quaddance.dancefile import Dance, save_dance
-from quaddance.errors import InputFileError, QuaddanceError
-from quaddance.fileio import check_output_file
+from quaddance.errors import QuaddanceError, not_a_file
+from quaddance.fileio import check_distinct, check_output_file
 from quaddance.layout import (
     BODY,
     BODY_COLUMNS,
@@ -278,6 +278,11 @@ class ChoreographJob:
     check: bool = False
 
 
+def dance_inputs(song: Path | None, motion: Path | None, spec: DanceSpec) -> dict[str, Path | None]:
+    """The files a dance is made from, by the option that names them (None: not given)."""
+    return {"SONG": song, "--motion": motion, "--beats": spec.beats.path if spec.beats else None}
+
+
 def run_choreograph(job: ChoreographJob) -> tuple[Dance, Analysis | None]:
     """Make ``job``'s dance with `make_dance` and save it to ``job.out`` (unless ``job.check``).
 
@@ -286,9 +291,10 @@ def run_choreograph(job: ChoreographJob) -> tuple[Dance, Analysis | None]:
     """
     for path in (job.song, job.motion):
         if path is not None and not path.is_file():
-            raise InputFileError(path, "no such file")
+            raise not_a_file(path)
     if not job.check:
         check_output_file(job.out)
+        check_distinct({"--out": job.out}, dance_inputs(job.song, job.motion, job.spec))
     dance, analysis = make_dance(job.song, job.motion, job.spec)
     if not job.check:
         save_dance(job.out, dance)

@@ -30,7 +30,7 @@ from typing import Any
 
 from quaddance.choreo.body import BODY_MOVES, BODY_STYLES, SHAPES, BodyMove, Gesture, MoveSet
 from quaddance.choreo.choreographer import MOVES
-from quaddance.errors import InputFileError
+from quaddance.errors import InputFileError, not_a_file
 from quaddance.layout import BODY_COLUMNS
 from quaddance.robots import GO1, BodyLimits
 
@@ -126,7 +126,7 @@ def load_moves(path: str | Path, limits: BodyLimits = GO1.body_four_feet) -> Mov
     is for). Raise `InputFileError` (one line) for anything wrong."""
     path = Path(path)
     if not path.is_file():
-        raise InputFileError(path, "no such file")
+        raise not_a_file(path)
     if path.stat().st_size > MAX_MOVES_FILE_BYTES:
         raise InputFileError(path, f"is larger than {MAX_MOVES_FILE_BYTES >> 20} MB")
     try:

@@ -19,7 +19,7 @@ __all__ = ["EXIT_SIGINT", "EXIT_SIGTERM", "app", "main", "one_line_error"]
 app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
-    help="Make a Unitree Go1 quadruped dance to any piece of music.",
+    help="Make a Unitree Go1 or Go2 quadruped dance to any piece of music.",
 )
 app.command("analyze")(music.analyze_cmd)
 app.command("demo-song")(music.demo_song_cmd)

@@ -25,7 +25,7 @@ ModeOpt = Annotated[
 ]
 StyleOpt = Annotated[
     str,
-    typer.Option(help="Choreographer style: mixed, calm, energetic or footwork (or --moves')."),
+    typer.Option(help="Choreographer style: mixed, calm, energetic or footwork (or --moves' own)."),
 ]
 SeedOpt = Annotated[
     int, typer.Option(help="Choreographer seed: another seed, another dance.", **SeedRange)

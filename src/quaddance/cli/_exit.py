@@ -73,7 +73,7 @@ def run_command(app: Callable[[], Any]) -> None:
     received = _stop_on_signals()
     try:
         try:
-            app()
+            _run_app(app)
         finally:
             # The work is over (done, failed or interrupted): a signal during the exit must
             # neither raise in the handlers below nor kill the process silently (at shutdown
@@ -94,6 +94,32 @@ def run_command(app: Callable[[], Any]) -> None:
         if received:
             _interrupted(received)
         raise
+
+
+def _run_app(app: Callable[..., Any]) -> None:
+    """Call ``app``; a typer app runs outside click's standalone mode, so that a bad option or
+    argument is one line here rather than the usage text and a box."""
+    import typer
+
+    if not isinstance(app, typer.Typer):
+        app()
+        return
+    try:
+        code = app(prog_name="quaddance", standalone_mode=False)
+    except typer.Abort as err:  # typer's wrapper of a Ctrl-C, and of an EOFError
+        if isinstance(err.__context__, EOFError):  # a bug to report, not an interruption
+            raise err.__context__ from None
+        raise KeyboardInterrupt from None
+    except typer.TyperException as err:  # a bad option or argument (click's UsageError)
+        if type(err).__name__ == "NoArgsIsHelpError":  # bare `quaddance`: typer printed help
+            sys.exit(2)
+        ctx = getattr(err, "ctx", None)
+        command = ctx.command_path if ctx is not None else "quaddance"
+        message = err.format_message().rstrip(".")
+        where = "" if command == "quaddance" else command.removeprefix("quaddance ") + ": "
+        print(one_line_error(f"{where}{message} (see {command} --help)"), file=sys.stderr)
+        sys.exit(2)
+    sys.exit(code if isinstance(code, int) else 0)  # as in standalone mode
 
 
 def _interrupted(received: dict[int, int]) -> None:

@@ -35,7 +35,8 @@ def choreograph_cmd(
     max_height: Annotated[
         float | None,
         typer.Option(
-            help="feasible mode: highest front-foot target, m (default: the robot's, measured).",
+            help="feasible mode: highest front-foot target, m (default: the range the robot's "
+            "shipped policy was trained on, as `dance` keeps to).",
             callback=finite_in(0.01, 1.0),
         ),
     ] = None,
@@ -56,12 +57,16 @@ def choreograph_cmd(
     from rich.console import Console
 
     from quaddance.pipeline import ChoreographJob, clamp_table, dance_table, run_choreograph
+    from quaddance.play.dance import shipped_max_height_m
     from quaddance.robots import get_robot
     from quaddance.targets import TargetConfig
 
     if song is None and motion is None:
         raise typer.BadParameter("give a SONG, or --motion FILE (or both)")
-    targets = TargetConfig(h0_m=h0, scale=scale, max_height_m=max_height, robot=get_robot(robot))
+    robot_cfg = get_robot(robot)
+    if max_height is None:  # the dance `dance` would make with the shipped policy
+        max_height = shipped_max_height_m(robot_cfg)
+    targets = TargetConfig(h0_m=h0, scale=scale, max_height_m=max_height, robot=robot_cfg)
     spec = dance_spec(mode, style, seed, moves, targets, beats, {"--motion": motion})
     job = ChoreographJob(song=song, motion=motion, out=out, spec=spec, check=check)
     with Console(stderr=True).status("Analysing the music and choreographing..."):

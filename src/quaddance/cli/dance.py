@@ -38,7 +38,7 @@ def dance_cmd(
     dance.mp4 (with the music), feet.png, metrics.json, dance.npz and rollout.npz."""
     from rich.console import Console
 
-    from quaddance.play.dance import DanceJob, run_dance
+    from quaddance.play.dance import DanceJob, earlier_outputs, run_dance
     from quaddance.play.metrics import summary_table
 
     spec, policy = policy_dance_spec(
@@ -76,6 +76,13 @@ def dance_cmd(
     Console().print(summary_table(result.metrics))
     for name, path in result.paths.items():
         console.print(f"{name}: {path}")
+    for path in earlier_outputs(job.out_dir, result.paths.values()):
+        console.print(
+            f"note: {path} is from an earlier run (this one did not write it)",
+            soft_wrap=True,
+            markup=False,
+            highlight=False,
+        )
     console.print(f"took {result.timings_s['total_s']:.1f} s")
     exit_without_teardown()
 

@@ -216,9 +216,9 @@ def run_live(job: LiveJob, status=lambda msg: None) -> tuple[dict, dict[str, Pat
     from quaddance.play.rollout import save_rollout
 
     if job.from_file is not None and not Path(job.from_file).is_file():
-        from quaddance.errors import InputFileError
+        from quaddance.errors import not_a_file
 
-        raise InputFileError(job.from_file, "no such file")
+        raise not_a_file(job.from_file)
     if job.video and job.from_file is None:
         raise QuaddanceError("--video needs --from-file (a microphone's sound is not kept)")
     if job.start_s != 0 and job.from_file is None:

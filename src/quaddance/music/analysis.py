@@ -43,7 +43,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from quaddance.errors import InputFileError
+from quaddance.errors import InputFileError, not_a_file
 from quaddance.layout import BEATS_PER_BAR, DANCE_TEMPO_BPM
 from quaddance.music import beat_activation
 
@@ -198,7 +198,7 @@ class Analysis:
         """Read an analysis written by ``save_json``; bad files raise ``InputFileError``."""
         path = Path(path)
         if not path.is_file():
-            raise InputFileError(path, "no such file")
+            raise not_a_file(path)
         try:
             data = json.loads(path.read_text())
         except (json.JSONDecodeError, UnicodeDecodeError) as err:

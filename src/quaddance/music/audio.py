@@ -131,10 +131,19 @@ def _too_long(duration_s: float, max_duration_s: float) -> str:
 
 
 def _soundfile_blocks(path: Path) -> Iterator[np.ndarray]:
-    """(frames, channels) float32 blocks from libsndfile."""
+    """(frames, channels) float32 blocks from libsndfile, until the decoder has no more.
+
+    Read until a read comes back empty, not for the frame count the header gives:
+    ``soundfile.blocks`` trusts that count, and for a truncated mp3 it repeats the last block
+    up to the length the header claims (a 0.15 s file read as 2 minutes)."""
     import soundfile as sf
 
-    yield from sf.blocks(str(path), blocksize=_BLOCK_FRAMES, dtype="float32", always_2d=True)
+    with sf.SoundFile(str(path)) as f:
+        while True:
+            block = f.read(_BLOCK_FRAMES, dtype="float32", always_2d=True)
+            if len(block) == 0:
+                return
+            yield block
 
 
 def _open_with_audioread(path: Path, max_duration_s: float) -> tuple[int, Iterator[np.ndarray]]:

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from quaddance.errors import InputFileError
+from quaddance.errors import InputFileError, not_a_file
 from quaddance.music.analysis import MIN_BEAT_GAP_S
 
 #: Fewest beats a file must give: one bar, the least the choreographer can dance to.
@@ -40,6 +40,9 @@ DOWNBEAT_ON_BEAT_S = 0.01
 MAX_BAR_BEATS = 12
 
 _SEPARATOR = re.compile(r"[\s,]+")
+#: A file whose lines are all "digits,digits" (and no valid bar count) was written with decimal
+#: commas.
+_DECIMAL_COMMA = re.compile(r"^(\d+,\d+[ \t]*(\r?\n|$)\s*)+$")
 
 
 @dataclass(frozen=True)
@@ -75,7 +78,7 @@ def read_beats(path: Path) -> BeatList:
     """The `BeatList` of a text or JSON beat file (see the module), checked."""
     path = Path(path)
     if not path.is_file():
-        raise InputFileError(path, "no such file")
+        raise not_a_file(path)
     try:
         text = path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError:
@@ -121,7 +124,14 @@ def _text_times(path: Path, text: str) -> tuple[list[float], list[float] | None]
         second_column.append(fields[1] if len(fields) > 1 else "")
     if not times:
         raise InputFileError(path, "no beat times (only blank lines and comments)")
-    return times, _bar_downbeats(times, second_column)
+    downbeats = _bar_downbeats(times, second_column)
+    if downbeats is None and _DECIMAL_COMMA.match(text.lstrip()):
+        # "0,5" in every line is a time written with a decimal comma, not "0" and a label.
+        first = text.lstrip().splitlines()[0].strip()
+        raise InputFileError(
+            path, f"line {first!r} reads as {times[0]:g} s: write times with a decimal point"
+        )
+    return times, downbeats
 
 
 def _bar_downbeats(times: list[float], column: list[str]) -> list[float] | None:

@@ -8,20 +8,40 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from quaddance.dancefile import Dance, save_dance
-from quaddance.errors import InputFileError
-from quaddance.fileio import check_output_file, ensure_dir, write_json
-from quaddance.pipeline import DanceSpec, make_dance
+from quaddance.errors import QuaddanceError, not_a_file
+from quaddance.fileio import (
+    check_distinct,
+    check_output_file,
+    ensure_dir,
+    remove_empty_dir,
+    write_json,
+)
+from quaddance.pipeline import DanceSpec, dance_inputs, make_dance
 
 if TYPE_CHECKING:
     from quaddance.play.policy import OnnxPolicy
     from quaddance.play.rollout import PinnedDynamics
     from quaddance.play.video import VideoRenderer
+    from quaddance.robots import RobotCfg
+
+
+OUTPUT_NAMES = ("dance.npz", "rollout.npz", "feet.png", "metrics.json", "dance.mp4")
+"""The files `run_dance` writes in its folder."""
+
+
+def earlier_outputs(out_dir: Path, written: Iterable[Path]) -> list[Path]:
+    """The files of `OUTPUT_NAMES` in ``out_dir`` that this run did not write (``--no-video``
+    after a run with video leaves the older video): named, so that nobody takes them for
+    this run's, and kept, since they are someone's work."""
+    done = {Path(p).resolve() for p in written}
+    found = (out_dir / name for name in OUTPUT_NAMES)
+    return [p for p in found if p.is_file() and p.resolve() not in done]
 
 
 @dataclass
@@ -62,6 +82,19 @@ def trained_max_height_m(policy: OnnxPolicy) -> float | None:
     return policy.meta.get("targets", {}).get("max_height_m")
 
 
+def shipped_max_height_m(robot: RobotCfg) -> float | None:
+    """The highest paw target of the range ``robot``'s shipped policy was trained on, the
+    one `dance` keeps to without ``--policy``; None where no policy ships or it gives none."""
+    from quaddance.play.policy import shipped_policy_path
+    from quaddance.play.policy_spec import PolicySpec
+
+    try:
+        path = shipped_policy_path(robot)
+    except QuaddanceError:
+        return None
+    return PolicySpec.load(path.with_suffix(".json")).targets_max_height_m
+
+
 def spec_for_policy(spec: DanceSpec, policy: OnnxPolicy) -> DanceSpec:
     """``spec`` with its paw targets in the range the policy was trained on (its JSON); a
     policy trained on eq. 4 targets dances eq. 4 targets with its h0, the only kind it saw.
@@ -99,6 +132,7 @@ def run_dance(
     overlaps the analysis and the simulation; feet.png is drawn while the video renders.
     """
     t_start = time.perf_counter()
+    made_out_dir = not Path(job.out_dir).exists()
     pending = _Helper.start(job)
     try:
         if not job.video:
@@ -112,6 +146,10 @@ def run_dance(
             return _run_dance(
                 job, renderer, pending, t_start, status, sim_progress, show_render_progress
             )
+    except BaseException:
+        if made_out_dir:  # a bad input leaves no empty folder behind
+            remove_empty_dir(job.out_dir)
+        raise
     finally:
         if pending is not None:
             pending.close()
@@ -194,13 +232,15 @@ def _run_dance(
 
     for path in (job.song, job.motion):
         if path is not None and not Path(path).is_file():
-            raise InputFileError(path, "no such file")
+            raise not_a_file(path)
     policy_path = job.policy or shipped_policy_path(job.spec.robot)
     policy = OnnxPolicy.load(policy_path)
     spec = spec_for_policy(job.spec, policy)
     out = ensure_dir(job.out_dir)
-    for name in ("dance.npz", "rollout.npz", "feet.png", "metrics.json", "dance.mp4"):
-        check_output_file(out / name)  # refuse a FIFO or device before the work, not after
+    outputs = {name: out / name for name in OUTPUT_NAMES}
+    for path in outputs.values():
+        check_output_file(path)  # refuse a FIFO or device before the work, not after
+    check_distinct(outputs, dance_inputs(job.song, job.motion, job.spec))
     timings: dict[str, float] = {}
 
     status("analysing the music and choreographing")

@@ -152,7 +152,9 @@ def _body_panel(ax, time: np.ndarray, targets: np.ndarray, measured: np.ndarray)
         ax.plot(time, measured[:, col] * scale, "-", color=colour, lw=1.1, alpha=0.9, label=label)
     ax.set_ylabel("trunk (cm, deg)")
     ax.set_xlabel("time (s)")
-    ax.legend(loc="upper right", fontsize=8, frameon=False, ncol=4, title="dashed: target")
+    # Framed: the trunk curves fill the panel, and the legend must stay legible over them.
+    ax.legend(loc="upper right", fontsize=8, ncol=4, title="dashed: target", title_fontsize=8,
+              framealpha=0.85, edgecolor="none")  # fmt: skip
 
 
 def _get(row: Mapping[str, Any], *keys: str) -> float:

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from quaddance.errors import InputFileError, QuaddanceError
+from quaddance.errors import InputFileError, QuaddanceError, not_a_file
 from quaddance.play.policy_spec import PolicySpec
 from quaddance.robots import GO1, RobotCfg, get_robot
 from quaddance.sim.config import DanceTaskCfg
@@ -67,7 +67,7 @@ def _read_spec(onnx_path: Path) -> PolicySpec:
     """The checked JSON contract beside ``onnx_path`` (both files must be there)."""
     json_path = onnx_path.with_suffix(".json")
     if not onnx_path.is_file():
-        raise InputFileError(onnx_path, "no such policy file")
+        raise not_a_file(onnx_path)
     if not json_path.is_file():
         raise InputFileError(json_path, "missing: a policy needs its JSON beside the .onnx")
     return PolicySpec.load(json_path)

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from quaddance.errors import InputFileError
+from quaddance.errors import InputFileError, not_a_file
 from quaddance.robots import GO1, ROBOTS, RobotCfg, get_robot
 from quaddance.sim.config import SOURCES, DanceTaskCfg, ObsSlice
 from quaddance.sim.records import reward_term, task_from_record
@@ -211,7 +211,7 @@ class PolicySpec:
         """Read and check the policy JSON at ``path``."""
         path = Path(path)
         if not path.is_file():
-            raise InputFileError(path, "no such file")
+            raise not_a_file(path)
         if path.stat().st_size > MAX_JSON_BYTES:
             raise InputFileError(
                 path, f"is {path.stat().st_size} bytes; a policy JSON has at most {MAX_JSON_BYTES}"
