@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import math
 import shutil
@@ -18,9 +19,9 @@ from tensordict import TensorDict
 from typer.testing import CliRunner
 
 from quaddance.cli import app, main
-from quaddance.errors import InputFileError
+from quaddance.errors import InputFileError, OutputFileError
 from quaddance.play.policy_spec import PolicySpec
-from quaddance.robots import GO1
+from quaddance.robots import GO1, GO2
 from quaddance.sim import tasks
 from quaddance.train import TrainCfg, Trainer, build_bank
 
@@ -464,3 +465,88 @@ def test_sigterm_stops_training_with_a_checkpoint_of_the_last_iteration(tmp_path
         rows = list(csv.DictReader(f))
     assert len(rows) >= 2
     assert state["iteration"] == int(rows[-1]["iteration"])
+
+
+# --- a run folder holds one run ---------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "content",
+    [
+        pytest.param(bytes(range(256)) * 40, id="random-bytes"),
+        pytest.param(b"", id="empty"),
+        pytest.param(b"\x08\x01\x12\x04onnx" * 30, id="onnx-like"),
+    ],
+)
+def test_init_from_a_file_that_is_no_checkpoint_is_one_line_before_any_work(
+    tmp_path, monkeypatch, capsys, content
+):
+    """torch.load raised an UnpicklingError (a traceback) or an EOFError (which click calls an
+    abort: `quaddance: interrupted`); the bank was built before the file was read."""
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(content)
+    run_dir = tmp_path / "run"
+    monkeypatch.setattr(sys, "argv", ["quaddance", "train", "--run-dir", str(run_dir),
+                                      "--init-from", str(bad), "--num-envs", "2",
+                                      "--bank-size", "1", "--iterations", "1"])  # fmt: skip
+    with pytest.raises(SystemExit) as exc:
+        main()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert exc.value.code == 2 and len(err) == 1, err
+    assert err[0].startswith(f"quaddance: error: {bad}: not a quaddance checkpoint"), err
+    assert not run_dir.exists()
+
+
+def test_resume_refuses_options_that_change_what_the_run_learns(trained, tmp_path):
+    run_dir = tmp_path / "run"
+    shutil.copytree(trained.run_dir, run_dir)
+    before = (run_dir / "checkpoint.pt").read_bytes()
+    changed = make_cfg(run_dir, "table1-3", resume=True, seed=5)
+    changed.task = tasks.paws_only("table1-3", num_envs=NUM_ENVS, robot=GO2)
+    with pytest.raises(InputFileError) as info:
+        Trainer(changed, bank=small_bank(), log=lambda *a: None)
+    message = str(info.value)
+    assert message.startswith(f"{run_dir / 'checkpoint.pt'}: --resume continues a run")
+    assert "robot (run: unitree_go1, now: unitree_go2)" in message
+    assert "seed (run: 1, now: 5)" in message
+    # How long and where it runs may change: more envs, another budget.
+    more = make_cfg(run_dir, "table1-3", resume=True, max_minutes=1.0)
+    more.task = tasks.paws_only("table1-3", num_envs=2 * NUM_ENVS)
+    assert Trainer(more, bank=small_bank(), log=lambda *a: None).iteration == 2
+    assert (run_dir / "checkpoint.pt").read_bytes() == before
+
+
+def test_a_new_run_in_a_folder_of_another_run_is_refused(trained, tmp_path):
+    run_dir = tmp_path / "run"
+    shutil.copytree(trained.run_dir, run_dir)
+    before = {p.name: p.read_bytes() for p in run_dir.iterdir() if p.is_file()}
+    with pytest.raises(OutputFileError, match=r"holds another run \(checkpoint.pt\); continue"):
+        Trainer(make_cfg(run_dir, "table1-3"), bank=small_bank(), log=lambda *a: None)
+    assert {p.name: p.read_bytes() for p in run_dir.iterdir() if p.is_file()} == before
+
+
+def test_resume_drops_the_curve_rows_after_its_checkpoint(trained, tmp_path):
+    """Killed (kill -9) after a row was written but before the next checkpoint: the resumed
+    run redoes that iteration, and the curve holds it once."""
+    run_dir = tmp_path / "run"
+    shutil.copytree(trained.run_dir, run_dir)
+    curve = run_dir / "curve.csv"
+    lines = curve.read_text().splitlines(keepends=True)
+    curve.write_text("".join(lines) + lines[-1].replace("2,", "3,", 1))
+    resumed = Trainer(make_cfg(run_dir, "table1-3", resume=True), bank=small_bank(),
+                      log=lambda *a: None)  # fmt: skip
+    resumed.learn(1, progress=False)
+    with curve.open() as f:
+        assert [int(r["iteration"]) for r in csv.DictReader(f)] == [1, 2, 3]
+
+
+def test_the_cached_bank_follows_the_bank_options(tmp_path):
+    """`bank.npy` is rebuilt when the options that made it change, or when it does not read;
+    with `--bank-size 1 --seed 7` the cache of a 2-song bank of seed 1 was returned."""
+    first = build_bank(make_cfg(tmp_path, bank_duration_s=8.0))
+    other = dataclasses.replace(make_cfg(tmp_path, bank_duration_s=8.0, seed=7), bank_size=1)
+    other_seed = build_bank(other)
+    assert other_seed.shape == (1, 400, 4) and not np.array_equal(other_seed[0], first[0])
+    assert json.loads((tmp_path / "bank.json").read_text())["seed"] == 7
+    (tmp_path / "bank.npy").write_bytes(b"")
+    np.testing.assert_array_equal(build_bank(other), other_seed)

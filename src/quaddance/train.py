@@ -1,8 +1,10 @@
 """PPO training of the dance task with rsl-rl: presets, checkpoints, resume, ONNX export.
 
-A run directory holds `checkpoint.pt` (written atomically every few minutes and at the end),
-`bank.npy` (the target bank, rebuilt from its seed if missing), `curve.csv` (the learning
-curve), TensorBoard logs under `tb/`, and at the end `policy.onnx` + `policy.json`.
+A run directory holds one run: `checkpoint.pt` (written atomically every few minutes and at
+the end), `bank.npy` (the target bank, rebuilt from its seed if missing; `bank.json`: the
+options it was built with), `curve.csv` (the learning curve), TensorBoard logs under `tb/`, and
+at the end `policy.onnx` + `policy.json`. A new run refuses a folder with another run in it;
+``--resume`` refuses options that change what the run learns (`run_start`).
 """
 
 from __future__ import annotations
@@ -25,8 +27,8 @@ import numpy as np
 import torch
 
 from quaddance import __version__
-from quaddance.errors import InputFileError, QuaddanceError
-from quaddance.fileio import atomic_path
+from quaddance.errors import InputFileError, OutputFileError, QuaddanceError
+from quaddance.fileio import atomic_path, write_json
 from quaddance.layout import row_width
 from quaddance.play.policy_spec import FORMAT
 from quaddance.sim import tasks
@@ -128,16 +130,33 @@ def rsl_rl_cfg(preset: Preset, cfg: TrainCfg) -> dict:
     }
 
 
+def bank_options(cfg: TrainCfg) -> dict:
+    """What decides a run's target bank (`build_bank`), as plain data."""
+    record = {
+        "bank_size": cfg.bank_size,
+        "bank_duration_s": cfg.bank_duration_s,
+        "seed": cfg.seed,
+        "whole_body": cfg.task.whole_body,
+        "robot": cfg.task.scene.robot.name,
+        "targets": dataclasses.asdict(_target_cfg(cfg)),
+    }
+    return json.loads(json.dumps(record, default=str))
+
+
 def build_bank(cfg: TrainCfg, progress=None) -> np.ndarray:
-    """The target bank: built-in choreographies of synthetic songs, cached in the run dir."""
+    """The target bank: built-in choreographies of synthetic songs, cached in the run dir
+    (`bank.npy`, with the options it was built with in `bank.json`; other options, or a
+    cache that does not read, build it again)."""
     from quaddance.pipeline import target_bank
 
-    path = cfg.run_dir / "bank.npy"
+    path, options_path = cfg.run_dir / "bank.npy", cfg.run_dir / "bank.json"
     width = row_width(cfg.task.whole_body)
-    if path.exists():
-        bank = np.load(path, allow_pickle=False)
-        if bank.ndim == 3 and bank.shape[2] == width:
-            return bank
+    options = bank_options(cfg)
+    with contextlib.suppress(Exception):  # a missing, stale or unreadable cache is rebuilt
+        if json.loads(options_path.read_text()) == options:
+            bank = np.load(path, allow_pickle=False)
+            if bank.ndim == 3 and bank.shape[2] == width:
+                return bank
     bank = target_bank(
         cfg.bank_size,
         cfg.bank_duration_s,
@@ -148,6 +167,7 @@ def build_bank(cfg: TrainCfg, progress=None) -> np.ndarray:
     )
     with atomic_path(path) as tmp:
         np.save(tmp, bank)
+    write_json(options_path, options)
     return bank
 
 
@@ -229,7 +249,87 @@ def _config_dict(cfg: TrainCfg) -> dict:
     d = {f.name: getattr(cfg, f.name) for f in dataclasses.fields(cfg)}
     d["run_dir"] = str(cfg.run_dir)
     d["task"] = task_record(cfg.task)
+    d["robot"] = cfg.task.scene.robot.name
     return d
+
+
+RESUME_MAY_CHANGE = frozenset(
+    {"run_dir", "resume", "iterations", "checkpoint_every_s", "max_minutes", "torch_threads",
+     "init_from", "engine", "task.num_envs"}
+)  # fmt: skip
+"""Options a resumed run may change: how long and where it runs, not what it learns."""
+
+
+def _differences(run: dict, now: dict, prefix: str = "") -> list[str]:
+    """``key (run: a, now: b)`` for each option both records have and that differs."""
+    out = []
+    for key in run.keys() & now.keys():
+        name = prefix + key
+        if name in RESUME_MAY_CHANGE:
+            continue
+        if isinstance(run[key], dict) and isinstance(now[key], dict):
+            out += _differences(run[key], now[key], name + ".")
+        elif run[key] != now[key]:
+            out.append(f"{name} (run: {run[key]}, now: {now[key]})")
+    return sorted(out)
+
+
+def read_checkpoint(path: Path, device: str = "cpu") -> dict:
+    """A checkpoint's state, read by torch's weights-only unpickler (tensors and plain
+    containers, never code); one line for a file that is not a quaddance checkpoint."""
+    try:
+        state = torch.load(path, map_location=device, weights_only=True)
+    except Exception as err:  # torch.load raises many types for a foreign or corrupt file
+        first = (str(err).strip().splitlines() or [""])[0][:160]
+        raise InputFileError(
+            path, f"not a quaddance checkpoint ({type(err).__name__}: {first})"
+        ) from None
+    if not isinstance(state, dict) or not isinstance(state.get("config_json"), str):
+        raise InputFileError(path, "not a quaddance checkpoint (no run options in it)")
+    return state
+
+
+def run_start(cfg: TrainCfg) -> tuple[dict | None, dict | None]:
+    """Check the run folder and read the checkpoint the run starts from, before anything is
+    built or written: (the state ``--resume`` continues, the state ``--init-from`` starts
+    from); None where not asked for.
+
+    Raises:
+        InputFileError: a checkpoint is missing or unreadable, or ``--resume`` would change what
+            the run learns (its task, robot, rewards, bank or PPO settings).
+        OutputFileError: a new run would write over another run in its folder.
+    """
+    if cfg.resume:
+        return _resumable(cfg, cfg.run_dir / "checkpoint.pt"), None
+    _check_fresh_run_dir(cfg.run_dir)
+    if cfg.init_from is None:
+        return None, None
+    if not Path(cfg.init_from).is_file():
+        raise InputFileError(cfg.init_from, "no such checkpoint (--init-from)")
+    return None, read_checkpoint(Path(cfg.init_from))
+
+
+def _resumable(cfg: TrainCfg, path: Path) -> dict:
+    """The checkpoint ``path`` of the run to continue, refused where ``cfg`` would change what
+    the run learns."""
+    if not path.exists():
+        raise InputFileError(path, "no checkpoint to resume from (train without --resume)")
+    state = read_checkpoint(path)
+    try:
+        run = json.loads(state["config_json"])
+    except json.JSONDecodeError:
+        raise InputFileError(path, "not a quaddance checkpoint (unreadable options)") from None
+    now = json.loads(json.dumps(_config_dict(cfg), default=str))
+    changed = _differences(run, now)
+    if changed:
+        raise InputFileError(
+            path,
+            "--resume continues a run with the options it was started with; these differ: "
+            + "; ".join(changed)
+            + " (to train with other options from its networks: a new --run-dir with "
+            "--init-from this checkpoint)",
+        )
+    return state
 
 
 class Trainer:
@@ -251,6 +351,8 @@ class Trainer:
         if cfg.torch_threads:
             torch.set_num_threads(cfg.torch_threads)
         torch.manual_seed(cfg.seed)
+        self.ckpt_path = cfg.run_dir / "checkpoint.pt"
+        resumed, started_from = run_start(cfg)
         cfg.run_dir.mkdir(parents=True, exist_ok=True)
         self.bank = build_bank(cfg) if bank is None else bank
         self.env = DanceEnv(copy.deepcopy(cfg.task), self.bank, engine=cfg.engine, seed=cfg.seed)
@@ -268,11 +370,10 @@ class Trainer:
         self.iteration = 0
         self.env_steps = 0
         self.wall_s = 0.0
-        self.ckpt_path = cfg.run_dir / "checkpoint.pt"
-        if cfg.resume:
-            self._load(self.ckpt_path)
-        elif cfg.init_from is not None:
-            self._init_from(Path(cfg.init_from))
+        if resumed is not None:
+            self._load(self.ckpt_path, resumed)
+        elif started_from is not None:
+            self._init_from(Path(cfg.init_from), started_from)
 
     # --- checkpoints -------------------------------------------------------------------------
     def save(self) -> None:
@@ -290,19 +391,15 @@ class Trainer:
         with atomic_path(self.ckpt_path) as tmp:
             torch.save(state, tmp)
 
-    def _load(self, path: Path) -> None:
-        if not path.exists():
-            raise InputFileError(path, "no checkpoint to resume from (train without --resume)")
+    def _load(self, path: Path, state: dict) -> None:
         try:
-            # weights_only: tensors and plain containers only, never arbitrary objects.
-            state = torch.load(path, map_location=self.device, weights_only=True)
             self.alg.load(state, None, strict=True)
             self.iteration = int(state["iteration"])
             self.env_steps = int(state["env_steps"])
             self.wall_s = float(state["wall_s"])
             torch.set_rng_state(state["torch_rng"])
             self.env._gen.set_state(state["env_rng"])
-        except Exception as err:  # torch.load raises many types for a foreign/corrupt file
+        except Exception as err:  # a checkpoint of another version or task fails in many ways
             if "size mismatch" in str(err):
                 # A run of another task (say paws-only, resumed with --whole-body): its
                 # networks cannot continue here, but they can start a new run.
@@ -314,17 +411,17 @@ class Trainer:
             raise InputFileError(
                 path, f"not a usable checkpoint for this task ({type(err).__name__}: {err})"
             ) from err
+        # Rows written after the checkpoint (a run killed between two checkpoints) are redone.
+        _truncate_curve(self.cfg.run_dir / "curve.csv", self.iteration)
         self.log(f"resumed {path} at iteration {self.iteration} ({self.env_steps:,} env steps)")
 
-    def _init_from(self, path: Path) -> None:
-        """Copy another run's actor and critic, input column by input column (by name)."""
+    def _init_from(self, path: Path, state: dict) -> None:
+        """Copy another run's actor and critic (``state``, read from ``path``), input column by
+        input column (by name)."""
         from quaddance.sim.observations import ActorObservation, ObsLayout
         from quaddance.sim.records import task_from_record
 
-        if not path.is_file():
-            raise InputFileError(path, "no such checkpoint (--init-from)")
         try:
-            state = torch.load(path, map_location=self.device, weights_only=True)
             record = json.loads(state["config_json"])["task"]
             old_task = task_from_record(record, self.cfg.task.scene.robot)
             old_names = ObsLayout.of(
@@ -595,6 +692,28 @@ def _signals_deferred():
             signum, frame = _DEFER.pending
             _DEFER.pending = None
             _act_on_signal(signum, frame)
+
+
+def _check_fresh_run_dir(run_dir: Path) -> None:
+    """A new run must not write over another run's checkpoint and learning curve."""
+    for name in ("checkpoint.pt", "curve.csv"):
+        if (run_dir / name).exists():
+            raise OutputFileError(
+                run_dir,
+                f"holds another run ({name}); continue it with --resume, or train in a new "
+                "--run-dir",
+            )
+
+
+def _truncate_curve(path: Path, iteration: int) -> None:
+    """Keep the rows of `curve.csv` up to ``iteration`` (written atomically)."""
+    if not path.exists():
+        return
+    lines = path.read_text().splitlines(keepends=True)
+    keep = lines[:1] + [ln for ln in lines[1:] if int(float(ln.split(",", 1)[0])) <= iteration]
+    if len(keep) < len(lines):
+        with atomic_path(path) as tmp:
+            tmp.write_text("".join(keep))
 
 
 def _append_csv(path: Path, row: dict) -> None:

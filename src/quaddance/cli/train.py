@@ -166,6 +166,14 @@ def train_cmd(
         options["curriculum_env_steps"] = None  # a trained policy takes the full task at once
     variant = tasks.TASKS["whole-body" if whole_body else "paws-only"]
     console = Console(stderr=True)
+    if engine == "gpu":
+        import torch
+
+        if not torch.cuda.is_available():
+            console.print(
+                "warning: no CUDA device: --engine gpu runs MuJoCo Warp on the CPU, far slower "
+                "than --engine cpu"
+            )
     cfg = TrainCfg(
         run_dir=run_dir,
         engine=engine,
@@ -184,8 +192,9 @@ def train_cmd(
     )
     with console.status("Building the target bank (first run only) and the envs..."):
         from quaddance.fileio import ensure_dir
-        from quaddance.train import build_bank
+        from quaddance.train import build_bank, run_start
 
+        run_start(cfg)  # a bad checkpoint or run folder fails before the bank is built
         ensure_dir(run_dir)
         bank = build_bank(cfg)
     trainer = train(cfg, log=console.print, progress=progress, bank=bank)

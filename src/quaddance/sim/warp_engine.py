@@ -41,6 +41,7 @@ class WarpEngine:
         import mujoco_warp as mjw
         import warp as wp
 
+        wp.config.log_level = wp.LOG_WARNING  # no banner, no line per module loaded
         wp.init()
         self._wp, self._mjw = wp, mjw
         wp_device = device or ("cuda:0" if wp.is_cuda_available() else "cpu")
