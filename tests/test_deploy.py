@@ -339,8 +339,13 @@ def test_sim_fault_ends_in_damp_within_its_deadline(policy, tmp_path, fault, dea
         assert summary["falls"] >= 1  # the shove topples the robot; damping caught it
 
 
-@pytest.mark.parametrize("backend", ["sim", "go1-sim", "go2-sim"])
-def test_ctrl_c_damps_writes_the_log_and_exits_0(tmp_path, backend):
+@pytest.mark.parametrize(
+    ("backend", "presses_s"),
+    [("sim", (0.0,)), ("go1-sim", (0.0,)), ("go2-sim", (0.0,)),
+     # A panicking hand presses again: at 0.25-0.3 s the log used to be lost (exit 130).
+     ("sim", (0.0, 0.1, 0.2, 0.27, 0.35, 0.5, 0.8, 1.2))],
+)  # fmt: skip
+def test_ctrl_c_damps_writes_the_log_and_exits_0(tmp_path, backend, presses_s):
     from quaddance.deploy.job import BACKENDS
     from quaddance.robots import get_robot
 
@@ -376,7 +381,11 @@ def test_ctrl_c_damps_writes_the_log_and_exits_0(tmp_path, backend):
         if "dance:" in line:
             break
     time.sleep(0.5)
-    proc.send_signal(signal.SIGINT)
+    start = time.monotonic()
+    for at_s in presses_s:
+        time.sleep(max(0.0, start + at_s - time.monotonic()))
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 0, "".join(lines) + err
     summary = json.loads((out / "deploy.json").read_text())
@@ -397,6 +406,10 @@ def test_deploy_refuses_bad_input_in_one_line(tmp_path):
         (["--demo", "--inject", "kick@1"], "--inject 'kick@1'"),
         (["--demo", "--robot", "go1", "--inject", "push@1"], "never on a real one"),
         ([str(tmp_path / "missing.wav")], "missing.wav: no such file"),
+        (
+            ["--demo", "--seconds", "4", "--inject", "push@5"],
+            "--inject push@5: the dance ends at 4.0",
+        ),
     ]:
         done = subprocess.run(
             [*cli, *args, "--out", str(tmp_path / "o")], capture_output=True, text=True, timeout=60
@@ -404,6 +417,16 @@ def test_deploy_refuses_bad_input_in_one_line(tmp_path):
         assert done.returncode == 2, done.stderr
         assert done.stderr.strip().count("\n") == 0 and needle in done.stderr, done.stderr
         assert not (tmp_path / "o" / "deploy.json").exists()
+    # A fault past the end of the dance is known once the dance is made (after its status line).
+    done = subprocess.run([*cli, "--demo", "--inject", "nan@1e9", "--out", str(tmp_path / "o")],
+                          capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert done.returncode == 2, done.stderr
+    last = done.stderr.strip().splitlines()[-1]
+    assert (
+        last
+        == "quaddance: error: --inject nan@1e+09: the dance ends at 30.0 s; pick a time before it"
+    )
+    assert not (tmp_path / "o" / "deploy.json").exists()
 
 
 @pytest.mark.parametrize("start_s", [0.0, 5.0])

@@ -369,3 +369,16 @@ def test_go1_sim_process_answers_the_backend_and_counts_what_it_applied():
     assert counts["torque_commands"] > 0 and counts["rejected"] == 0
     assert counts["commands"] > counts["torque_commands"]  # the SDK's idle ones came first
     assert reading.seq in np.rint(robot.truth()["time_s"] * 1e3)  # the robot's clock, ms
+
+
+def test_a_taken_local_port_is_named_not_called_a_network_fault():
+    """The SDK binds its local port for the robot's replies; taken, it printed a line and no
+    state came, which read as "no state from the Go1 ... (network set-up)"."""
+    from quaddance.errors import QuaddanceError
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as holder:
+        holder.bind((LOCALHOST, 0))
+        port = holder.getsockname()[1]
+        robot = Go1Robot(robot_ip=LOCALHOST, robot_port=free_udp_port(), local_port=port)
+        with pytest.raises(QuaddanceError, match=rf"local UDP port {port}, which the Go1 SDK"):
+            robot.start(timeout_s=0.5)

@@ -9,23 +9,31 @@ import sys
 
 
 class StopSignals:
-    """SIGINT / SIGTERM -> a flag the loop reads (the loop then damps and writes the log)."""
+    """SIGINT / SIGTERM -> a flag the loop reads (the loop then damps and writes the log).
+
+    Nested ``with`` blocks are one: the outer block holds the signals, so that a caller can
+    keep them past the loop until the log is written (a second Ctrl-C then loses nothing)."""
 
     def __init__(self) -> None:
         self.signal: int | None = None
         self._old: dict[int, object] = {}
+        self._depth = 0
 
     def __enter__(self) -> StopSignals:
         def handler(signum: int, frame: object) -> None:
             self.signal = self.signal or signum
 
-        for s in (signal.SIGINT, signal.SIGTERM):
-            self._old[s] = signal.signal(s, handler)
+        if self._depth == 0:
+            for s in (signal.SIGINT, signal.SIGTERM):
+                self._old[s] = signal.signal(s, handler)
+        self._depth += 1
         return self
 
     def __exit__(self, *exc: object) -> None:
-        for s, h in self._old.items():
-            signal.signal(s, h)  # type: ignore[arg-type]
+        self._depth -= 1
+        if self._depth == 0:
+            for s, h in self._old.items():
+                signal.signal(s, h)  # type: ignore[arg-type]
 
 
 def drain_stdin() -> None:

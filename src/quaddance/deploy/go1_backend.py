@@ -83,6 +83,21 @@ def reading_from_low_state(state, robot: RobotCfg) -> Reading:
     )
 
 
+def _check_local_port(port: int) -> None:
+    """The SDK binds this UDP port for the robot's replies; where another program holds it,
+    the SDK only prints a line and no state ever arrives, which reads as a network fault."""
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        try:
+            probe.bind(("0.0.0.0", port))
+        except OSError as err:
+            raise QuaddanceError(
+                f"the local UDP port {port}, which the Go1 SDK listens on, is taken "
+                f"({err.strerror or err}): another program (a second deploy?) holds it"
+            ) from None
+
+
 class Go1Robot(Robot):
     """`Robot` over the SDK's low-level UDP link, with its PositionLimit and PowerProtect."""
 
@@ -116,6 +131,7 @@ class Go1Robot(Robot):
 
     def start(self, timeout_s: float = 5.0) -> Reading:
         sdk = self._sdk = load_sdk()
+        _check_local_port(self.local_port)
         self._udp = sdk.UDP(LOWLEVEL, self.local_port, self.robot_ip, self.robot_port)
         self._safe = sdk.Safety(sdk.LeggedType.Go1)
         self._low_cmd = sdk.LowCmd()

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from quaddance.errors import InputFileError, QuaddanceError
+from quaddance.errors import InputFileError, QuaddanceError, not_a_file
 from quaddance.fileio import check_output_file
 from quaddance.layout import FRONT_PAWS
 from quaddance.pipeline import DanceSpec, make_dance
@@ -158,6 +158,7 @@ def run_dry(job: DeployJob, status: Callable[[str], None]) -> tuple[dict, dict]:
 def run_deploy(job: DeployJob, status: Callable[[str], None] = lambda m: None) -> tuple[dict, dict]:
     """Run the job; returns (deploy.json contents, output paths)."""
     from quaddance.dancefile import load_dance
+    from quaddance.deploy.console import StopSignals
     from quaddance.deploy.log import write_outputs
     from quaddance.deploy.runner import DeployOptions, Runner
     from quaddance.fileio import ensure_dir
@@ -183,9 +184,11 @@ def run_deploy(job: DeployJob, status: Callable[[str], None] = lambda m: None) -
         )
     if job.seconds is not None and not (math.isfinite(job.seconds) and job.seconds > 0):
         raise QuaddanceError(f"--seconds must be > 0, got {job.seconds}")
+    if job.seconds is not None:
+        _check_inject_times(job.inject, job.seconds)
     for path in (job.song, job.motion, job.dance):
         if path is not None and not Path(path).is_file():
-            raise InputFileError(path, "no such file")
+            raise not_a_file(path)
     policy = OnnxPolicy.load(job.policy or shipped_policy_path(job.spec.robot))
     spec = spec_for_policy(job.spec, policy)
     out = ensure_dir(job.out_dir)
@@ -209,6 +212,7 @@ def run_deploy(job: DeployJob, status: Callable[[str], None] = lambda m: None) -
                 job.dance or song or job.motion,
                 f"dance is at {dance.fps:g} Hz but the policy runs at {policy.task.policy_hz:g} Hz",
             )
+        _check_inject_times(job.inject, dance.targets_m.shape[0] / dance.fps)
         max_h = (policy.meta.get("targets") or {}).get("max_height_m")
         highest_m = float(dance.targets_m[:, FRONT_PAWS].max())
         if max_h is not None and highest_m > max_h + 1e-6:
@@ -219,17 +223,32 @@ def run_deploy(job: DeployJob, status: Callable[[str], None] = lambda m: None) -
         options = DeployOptions(
             seconds=job.seconds, auto_start=job.auto_start, inject=job.inject, song=song
         )
-        runner = Runner(
-            make_robot(job.backend, policy.task.scene.robot),
-            policy,
-            dance.targets_m,
-            options,
-            status=status,
-            body_targets=dance.body_targets,
-        )
-        result = runner.run()
-    paths = write_outputs(out, result, policy, dance.beats_s)
+        # Ctrl-C stops the dance (the robot damps), and from then until the log is written
+        # every further Ctrl-C is only the same request: a second press loses nothing.
+        stop = StopSignals()
+        with stop:
+            runner = Runner(
+                make_robot(job.backend, policy.task.scene.robot),
+                policy,
+                dance.targets_m,
+                options,
+                status=status,
+                body_targets=dance.body_targets,
+                stop=stop,
+            )
+            result = runner.run()
+            paths = write_outputs(out, result, policy, dance.beats_s)
     return result.summary, paths
+
+
+def _check_inject_times(inject: list[tuple[str, float]], end_s: float) -> None:
+    """A fault at or after the end of the dance would never happen, and the run would look
+    like a pass of the safety layer: one line instead."""
+    for fault, t_s in inject:
+        if t_s >= end_s:
+            raise QuaddanceError(
+                f"--inject {fault}@{t_s:g}: the dance ends at {end_s:.1f} s; pick a time before it"
+            )
 
 
 def summary_line(summary: dict) -> str:

@@ -58,11 +58,14 @@ class Runner:
         feeder: Callable[[float], None] | None = None,
         on_tick: Callable[[Tick], None] | None = None,
         dance_s: float | None = None,
+        stop: StopSignals | None = None,
     ) -> None:
         """``feeder(t_dance)`` runs at each dance tick before the policy (a live dance
         extends ``self.ctrl``'s targets there); ``on_tick(tick)`` after each
         command is sent (NaN before the dance); ``dance_s`` sets the dance's length instead
-        of the targets' (a dance made while it is danced)."""
+        of the targets' (a dance made while it is danced); ``stop``: the signals' flag, where
+        the caller holds it past the run (`StopSignals`)."""
+        self.stop = StopSignals() if stop is None else stop
         self.robot = robot
         self.feeder = feeder
         self.on_tick = on_tick
@@ -139,7 +142,7 @@ class Runner:
             self.robot.close()
             raise QuaddanceError(f"{self.robot.name}: {why}")
         rows: dict[str, list] = {k: [] for k in LOG_KEYS}
-        stop = StopSignals()
+        stop = self.stop
         states = DanceStates(
             sf,
             self.ctrl,
