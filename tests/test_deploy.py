@@ -447,3 +447,19 @@ def test_the_song_plays_from_where_the_dance_starts_or_not_at_all(monkeypatch, s
     audio = AudioPlayer(Path("song.wav"), start_s)
     assert (audio._cmd == ["afplay", "song.wav"]) == (start_s == 0)
     assert (audio.status == "ready") == (start_s == 0)
+
+
+def test_the_summary_line_says_why_a_run_ended_early():
+    """`deploy < /dev/null` without --auto-start dances 0 s and ends `done`: the line says
+    that nobody pressed Enter, not only "done"."""
+    from quaddance.deploy.job import summary_line
+
+    base = {"front": {}, "duration_s": 0.0, "falls": 0, "tick_ms": {"p99": 1.0}}
+    closed = {"final_state": "done", "events": [{"reason": "stdin closed: nobody to press Enter"}]}
+    assert summary_line({**base, **closed}).startswith(
+        "final state done (stdin closed: nobody to press Enter), danced 0.0 s"
+    )
+    danced = {"final_state": "done", "events": [{"reason": "dance finished"}]}
+    assert summary_line({**base, **danced}).startswith("final state done, danced")
+    stopped = {"final_state": "damp", "events": [{"reason": "signal SIGINT"}]}
+    assert summary_line({**base, **stopped}).startswith("final state damp (signal SIGINT),")

@@ -262,8 +262,12 @@ def summary_line(summary: dict) -> str:
         )
     front = summary["front"] or {}
     mae = [front[f]["mae_m"] for f in ("fl", "fr") if f in front and front[f]["mae_m"] is not None]
+    events = summary.get("events") or []
+    # Why the run ended, where it was not the dance's end: a signal, a fault, stdin closed.
+    why = events[-1].get("reason", "") if events else ""
+    why = f" ({why})" if why and why != "dance finished" else ""
     return (
-        f"final state {summary['final_state']}, danced {summary['duration_s']:.1f} s, "
+        f"final state {summary['final_state']}{why}, danced {summary['duration_s']:.1f} s, "
         f"falls {summary['falls']}, front MAE "
         + (f"{100 * sum(mae) / len(mae):.1f} cm" if mae else "n/a")
         + f", tick p99 {summary['tick_ms']['p99']} ms"
