@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 
 import numpy as np
 import pytest
@@ -259,3 +260,21 @@ def test_bench_deploy_robot_runs_that_backend_with_its_robots_policy(tmp_path, m
     bad = CliRunner().invoke(app, ["bench", "deploy", "--robot", "go2"])  # never a real one
     assert isinstance(bad.exception, QuaddanceError)
     assert "--robot must be one of sim, go1-sim, go2-sim" in str(bad.exception)
+
+
+def test_a_dry_run_names_the_rollout_an_earlier_run_left(tmp_path):
+    """A dry run writes deploy.json and log.npz; an earlier dance's rollout.npz in the folder
+    is kept and named as not this run's."""
+    import subprocess
+    import sys
+
+    older = tmp_path / "rollout.npz"
+    older.write_bytes(b"an earlier dance")
+    done = subprocess.run(
+        [sys.executable, "-m", "quaddance.cli", "deploy", "--dry-run", "--out", str(tmp_path)],
+        capture_output=True, text=True, timeout=120, env={**os.environ, "COLUMNS": "200"},
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    notes = [line for line in done.stderr.splitlines() if line.startswith("note:")]
+    assert notes == [f"note: {older} is from an earlier run (this one did not write it)"]
+    assert older.read_bytes() == b"an earlier dance" and (tmp_path / "deploy.json").is_file()

@@ -14,7 +14,7 @@ import json
 import os
 import stat
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -132,6 +132,15 @@ def ensure_dir(path: str | Path) -> Path:
     except OSError as err:
         raise OutputFileError(path, f"cannot create the folder ({err.strerror or err})") from None
     return path
+
+
+def earlier_outputs(out_dir: Path, names: Iterable[str], written: Iterable[Path]) -> list[Path]:
+    """The files ``names`` in ``out_dir`` that a run did not write (``written``): left by an
+    earlier run (``--no-video`` after a run with video, a run stopped before its dance). They
+    are kept, as someone's work, and named, so that nobody takes them for this run's."""
+    done = {Path(p).resolve() for p in written}
+    found = (Path(out_dir) / name for name in names)
+    return [p for p in found if p.is_file() and p.resolve() not in done]
 
 
 def remove_empty_dir(path: str | Path) -> None:

@@ -10,7 +10,7 @@ import typer
 
 from quaddance.cli._dance_spec import ModeOpt, MovesOpt, SeedOpt, StyleOpt, policy_dance_spec
 from quaddance.cli._exit import exit_without_teardown
-from quaddance.cli.options import BeatsOpt, PolicyOpt, PolicyRobotOpt
+from quaddance.cli.options import BeatsOpt, PolicyOpt, PolicyRobotOpt, note_earlier_outputs
 
 
 def dance_cmd(
@@ -38,7 +38,7 @@ def dance_cmd(
     dance.mp4 (with the music), feet.png, metrics.json, dance.npz and rollout.npz."""
     from rich.console import Console
 
-    from quaddance.play.dance import DanceJob, earlier_outputs, run_dance
+    from quaddance.play.dance import OUTPUT_NAMES, DanceJob, run_dance
     from quaddance.play.metrics import summary_table
 
     spec, policy = policy_dance_spec(
@@ -76,13 +76,7 @@ def dance_cmd(
     Console().print(summary_table(result.metrics))
     for name, path in result.paths.items():
         console.print(f"{name}: {path}")
-    for path in earlier_outputs(job.out_dir, result.paths.values()):
-        console.print(
-            f"note: {path} is from an earlier run (this one did not write it)",
-            soft_wrap=True,
-            markup=False,
-            highlight=False,
-        )
+    note_earlier_outputs(console, job.out_dir, OUTPUT_NAMES, result.paths.values())
     console.print(f"took {result.timings_s['total_s']:.1f} s")
     exit_without_teardown()
 

@@ -17,6 +17,7 @@ from quaddance.cli.options import (
     RobotIpOpt,
     RobotOpt,
     finite_in,
+    note_earlier_outputs,
 )
 
 
@@ -78,6 +79,7 @@ def deploy_cmd(
 
     from quaddance.deploy.job import (
         BACKENDS,
+        OUTPUT_NAMES,
         BackendOptions,
         DeployJob,
         parse_inject,
@@ -110,5 +112,6 @@ def deploy_cmd(
     console.print(summary_line(summary))
     for name, path in paths.items():
         console.print(f"{name}: {path}")
+    note_earlier_outputs(console, out, OUTPUT_NAMES, paths.values())
     if summary.get("dry_run") and not summary["ok"]:
         raise typer.Exit(1)

@@ -16,6 +16,7 @@ from quaddance.cli.options import (
     RobotIpOpt,
     RobotOpt,
     finite_in,
+    note_earlier_outputs,
 )
 
 
@@ -74,7 +75,7 @@ def live_cmd(
     from rich.console import Console
 
     from quaddance.deploy.job import BACKENDS, BackendOptions
-    from quaddance.live.session import LiveJob, run_live, summary_line
+    from quaddance.live.session import OUTPUT_NAMES, LiveJob, run_live, summary_line
 
     # ``--robot`` names the backend; the robot model is the backend's (sim: the policy's).
     spec, policy = policy_dance_spec(BACKENDS.get(robot), policy, mode, style, seed, moves)
@@ -99,3 +100,4 @@ def live_cmd(
     console.print(summary_line(summary))
     for name, path in paths.items():
         console.print(f"{name}: {path}")
+    note_earlier_outputs(console, out, OUTPUT_NAMES, paths.values())

@@ -1,11 +1,12 @@
 """Options and checks that several commands share: a bad value is a usage error (exit 2)
-naming the option."""
+naming the option; and the note on outputs an earlier run left."""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -72,3 +73,19 @@ def finite_in(lo: float, hi: float):
         return value
 
     return check
+
+
+def note_earlier_outputs(
+    console: Any, out_dir: Path, names: Iterable[str], written: Iterable[Path]
+) -> None:
+    """One ``note:`` line per file of ``names`` in ``out_dir`` that this run did not write
+    (`quaddance.fileio.earlier_outputs`)."""
+    from quaddance.fileio import earlier_outputs
+
+    for path in earlier_outputs(out_dir, names, written):
+        console.print(
+            f"note: {path} is from an earlier run (this one did not write it)",
+            soft_wrap=True,
+            markup=False,
+            highlight=False,
+        )

@@ -27,6 +27,7 @@ BACKENDS: dict[str, str | None] = {
     "go2": "go2",
 }
 SIMULATED: tuple[str, ...] = ("sim", "go1-sim", "go2-sim")  #: the backends faults reach
+OUTPUT_NAMES = ("deploy.json", "log.npz", "rollout.npz")  #: what `run_deploy` writes
 
 
 def parse_inject(values: list[str] | None) -> list[tuple[str, float]]:
@@ -192,7 +193,7 @@ def run_deploy(job: DeployJob, status: Callable[[str], None] = lambda m: None) -
     policy = OnnxPolicy.load(job.policy or shipped_policy_path(job.spec.robot))
     spec = spec_for_policy(job.spec, policy)
     out = ensure_dir(job.out_dir)
-    for name in ("deploy.json", "log.npz", "rollout.npz"):
+    for name in OUTPUT_NAMES:
         check_output_file(out / name)  # refuse a FIFO or a folder before the robot moves
 
     with tempfile.TemporaryDirectory(prefix="quaddance-deploy-") as tmp:

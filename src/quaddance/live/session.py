@@ -56,6 +56,10 @@ class LiveJob:
     spec: DanceSpec = field(default_factory=DanceSpec)
 
 
+OUTPUT_NAMES = ("live.json", "deploy.json", "log.npz", "rollout.npz", "dance.mp4")
+"""What `run_live` writes (the video with ``--video`` only)."""
+
+
 @dataclass
 class _Update:
     """What the listener sends after one audio block."""
@@ -229,7 +233,7 @@ def run_live(job: LiveJob, status=lambda msg: None) -> tuple[dict, dict[str, Pat
     policy = OnnxPolicy.load(job.policy or shipped_policy_path(job.spec.robot))
     dance_spec = spec_for_policy(job.spec, policy)
     out = ensure_dir(job.out_dir)
-    names = ["live.json", "deploy.json", "log.npz", "rollout.npz"] + ["dance.mp4"] * job.video
+    names = OUTPUT_NAMES if job.video else OUTPUT_NAMES[:-1]
     for name in names:
         check_output_file(out / name)
 

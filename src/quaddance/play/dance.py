@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -33,15 +33,6 @@ if TYPE_CHECKING:
 
 OUTPUT_NAMES = ("dance.npz", "rollout.npz", "feet.png", "metrics.json", "dance.mp4")
 """The files `run_dance` writes in its folder."""
-
-
-def earlier_outputs(out_dir: Path, written: Iterable[Path]) -> list[Path]:
-    """The files of `OUTPUT_NAMES` in ``out_dir`` that this run did not write (``--no-video``
-    after a run with video leaves the older video): named, so that nobody takes them for
-    this run's, and kept, since they are someone's work."""
-    done = {Path(p).resolve() for p in written}
-    found = (out_dir / name for name in OUTPUT_NAMES)
-    return [p for p in found if p.is_file() and p.resolve() not in done]
 
 
 @dataclass
