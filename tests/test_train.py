@@ -525,6 +525,20 @@ def test_a_new_run_in_a_folder_of_another_run_is_refused(trained, tmp_path):
     assert {p.name: p.read_bytes() for p in run_dir.iterdir() if p.is_file()} == before
 
 
+def test_a_new_run_starts_the_curve_of_a_run_killed_before_its_first_checkpoint(tmp_path):
+    """kill -9 before the first checkpoint leaves curve rows and nothing to resume: the next
+    run (a `quaddance study` that continues, say) starts the curve again."""
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    (run_dir / "curve.csv").write_text("iteration,reward_per_step\n1,-0.5\n2,-0.4\n")
+    trainer = Trainer(make_cfg(run_dir, "table1-3"), bank=small_bank(), log=lambda *a: None)
+    trainer.learn(1, progress=False)
+    with (run_dir / "curve.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert [int(r["iteration"]) for r in rows] == [1] and "front_abs_err_m" in rows[0]
+    assert (run_dir / "curve.unfinished.csv").read_text().endswith("2,-0.4\n")  # kept aside
+
+
 def test_resume_drops_the_curve_rows_after_its_checkpoint(trained, tmp_path):
     """Killed (kill -9) after a row was written but before the next checkpoint: the resumed
     run redoes that iteration, and the curve holds it once."""

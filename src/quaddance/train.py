@@ -370,6 +370,11 @@ class Trainer:
         self.iteration = 0
         self.env_steps = 0
         self.wall_s = 0.0
+        curve = cfg.run_dir / "curve.csv"
+        if resumed is None and curve.exists():
+            # The curve of a run killed before its first checkpoint: kept aside, not continued.
+            curve.replace(cfg.run_dir / "curve.unfinished.csv")
+            log(f"{curve}: a run that left no checkpoint; its curve is now curve.unfinished.csv")
         if resumed is not None:
             self._load(self.ckpt_path, resumed)
         elif started_from is not None:
@@ -695,14 +700,15 @@ def _signals_deferred():
 
 
 def _check_fresh_run_dir(run_dir: Path) -> None:
-    """A new run must not write over another run's checkpoint and learning curve."""
-    for name in ("checkpoint.pt", "curve.csv"):
-        if (run_dir / name).exists():
-            raise OutputFileError(
-                run_dir,
-                f"holds another run ({name}); continue it with --resume, or train in a new "
-                "--run-dir",
-            )
+    """A new run must not write over another run's checkpoint. (A curve without one is of a
+    run killed before its first checkpoint, which cannot be continued: `Trainer` sets it
+    aside and starts the curve again.)"""
+    if (run_dir / "checkpoint.pt").exists():
+        raise OutputFileError(
+            run_dir,
+            "holds another run (checkpoint.pt); continue it with --resume, or train in a new "
+            "--run-dir",
+        )
 
 
 def _truncate_curve(path: Path, iteration: int) -> None:
