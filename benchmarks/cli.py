@@ -680,10 +680,11 @@ def bench_reach_cmd(
     out = out or _robot_results(results["robot"], "reach.json")
     write_json(out, results)
     for foot, r in results["feet"].items():
+        failed = r["first_failure_m"]
+        fails = "no height tried failed" if failed is None else f"fails at {failed:.3f} m"
         print(
-            f"{foot}: reach {r['reach_m']:.3f} m (held {r['held_m']:.3f} m; fails at "
-            f"{r['first_failure_m'] or float('nan'):.3f} m); kinematic bound "
-            f"{r['kinematic_bound_front_m']:.3f} m in front of the hip, "
+            f"{foot}: reach {r['reach_m']:.3f} m (held {r['held_m']:.3f} m; {fails}); "
+            f"kinematic bound {r['kinematic_bound_front_m']:.3f} m in front of the hip, "
             f"{r['kinematic_bound_m']:.3f} m anywhere; {r['n_trials']} trials, {r['wall_s']:.1f} s"
         )
     print(f"-> {out}")

@@ -17,7 +17,7 @@ from quaddance.choreo.accents import (
     motion_accents_s,
 )
 from quaddance.choreo.body import BODY_MOVES, BODY_STYLES, choreograph_body, render_keys
-from quaddance.choreo.choreographer import STYLES, choreograph
+from quaddance.choreo.choreographer import MOVES, STYLES, choreograph
 from quaddance.choreo.grid import MusicGrid, synthetic_grid
 from quaddance.choreo.moves_file import load_moves
 from quaddance.cli import app
@@ -25,6 +25,7 @@ from quaddance.dancefile import Dance, load_dance, save_dance
 from quaddance.errors import InputFileError, QuaddanceError
 from quaddance.layout import BODY_COLUMNS, CHOREO_FPS
 from quaddance.pipeline import DanceSpec, make_dance, target_bank
+from quaddance.play.metrics import body_and_coverage
 from quaddance.robots import GO1
 from quaddance.targets import (
     TargetConfig,
@@ -262,6 +263,11 @@ def test_accents_and_coverage_functions():
     assert beat_coverage(accents, [2.05, 5.2, 7.0], tol_s=0.25) == pytest.approx(2 / 3)
     assert beat_coverage(accents, []) == 0.0
     assert beat_coverage([], [1.0]) == 0.0
+    # A dance (a motion) that ends before the song: only the beats it spans count, not the
+    # song's 40 after it (coverage was 2 of 44).
+    song_beats = np.concatenate([[2.05, 5.0, 7.5, 9.0], np.arange(10.5, 30.0, 0.5)])
+    coverage = body_and_coverage(t, paws, body, body, song_beats)["beat_coverage"]
+    assert coverage == pytest.approx(2 / 4)
 
 
 def test_demo_song_whole_body_covers_the_energetic_beats(demo_song):
@@ -377,7 +383,7 @@ run = 2.0
 
 def test_a_moves_file_adds_moves_and_styles(tmp_path):
     path = tmp_path / "moves.toml"
-    path.write_text(GOOD_MOVES)
+    path.write_text("\ufeff" + GOOD_MOVES)  # with the byte-order mark Windows editors write
     moves = load_moves(path)
     assert [m.name for m in moves.body_moves] == [m.name for m in BODY_MOVES] + ["wiggle"]
     grid = energetic_grid(20.0)
@@ -410,6 +416,10 @@ def test_a_moves_file_adds_moves_and_styles(tmp_path):
         ("[styles.s]\nbounce = -2.0", "bounce is -2"),
         ("[dances.x]\na = 1", "unknown section 'dances'"),
         ("[moves.x\n", "not valid TOML"),
+        (
+            "[styles.none]\n" + "\n".join(f"{m.name} = 0" for m in MOVES),
+            "styles.none gives every paw move weight 0",
+        ),
     ],
 )
 def test_bad_moves_files_are_one_line_errors(tmp_path, text, message):

@@ -277,3 +277,46 @@ def test_eval_title_flag_heads_the_report(song, tmp_path, captured):
     result = CliRunner().invoke(app, args)
     assert result.exit_code == 0, result.output
     assert report.read_text().startswith("# Set X, nominal\n")
+
+
+# --- files checked before the work -------------------------------------------------------------
+
+
+def _no_work(*args, **kwargs):
+    raise AssertionError("an item was danced before the files were checked")
+
+
+def test_eval_checks_its_files_before_dancing_any_item(tmp_path, monkeypatch):
+    """`eval -o` over an input replaced it with the report; `-o x.png` made the report its own
+    plot; a bad motion after a good one failed only after the good one was danced."""
+    from quaddance.errors import InputFileError, OutputFileError
+
+    monkeypatch.setattr(evaluate_mod, "evaluate_items", _no_work)
+    song = tmp_path / "song.wav"
+    y, _ = render_song(110.0, 3.0, seed=2)
+    sf.write(song, y, 22050)
+    before = song.read_bytes()
+    bad = tmp_path / "nan.bvh"
+    bad.write_text("HIERARCHY\nROOT Hips\n{\n  OFFSET nan 0 0\n}\nMOTION\n")
+    cases = [
+        ([str(song), "-o", str(song)], OutputFileError, "is also the input (item song.wav)"),
+        ([str(song), "-o", str(tmp_path / "r.png")], OutputFileError, "is given for both"),
+        ([str(song), "-o", str(tmp_path)], OutputFileError, "exists and is a folder"),
+        ([str(song), str(bad), "-o", str(tmp_path / "r.md")], InputFileError, "nan.bvh"),
+    ]
+    for args, error, words in cases:
+        result = CliRunner().invoke(app, ["eval", *args])
+        assert isinstance(result.exception, error), (args, result.output)
+        assert words in str(result.exception), str(result.exception)
+    assert song.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["nan.bvh", "song.wav"]
+
+
+def test_eval_held_out_over_a_file_is_one_line(tmp_path):
+    from quaddance.errors import OutputFileError
+
+    taken = tmp_path / "beats.txt"
+    taken.write_text("0.5\n")
+    result = CliRunner().invoke(app, ["eval", "--held-out", str(taken), "--set", "other"])
+    assert isinstance(result.exception, OutputFileError), result.output
+    assert str(result.exception).startswith(f"{taken}: exists and is a file")

@@ -249,6 +249,8 @@ def test_an_output_never_replaces_an_input_or_another_output(tmp_path) -> None:
     (tmp_path / "link.wav").symlink_to(song)
     beats = tmp_path / "beats.txt"
     beats.write_text("0.5\n1.0\n1.5\n2.0\n")
+    moves = tmp_path / "moves.toml"
+    moves.write_text("[styles.calmer]\nhold = 2.0\n")
     cases = [
         (["analyze", str(song), "-o", str(song)], "is also the input (SONG)"),
         (["analyze", str(song), "--click", str(tmp_path / "link.wav")], "input (SONG)"),
@@ -265,13 +267,16 @@ def test_an_output_never_replaces_an_input_or_another_output(tmp_path) -> None:
         ),
         (["choreograph", str(song), "-o", str(song)], "input (SONG); writing --out"),
         (["choreograph", str(song), "--beats", str(beats), "-o", str(beats)], "input (--beats)"),
+        (["choreograph", str(song), "--moves", str(moves), "-o", str(moves)], "input (--moves)"),
     ]
     for args, words in cases:
         result = runner.invoke(app, args)
         assert isinstance(result.exception, OutputFileError), (args, result.output)
         assert words in str(result.exception), str(result.exception)
     assert song.read_bytes() == before and beats.read_text().startswith("0.5")
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["beats.txt", "link.wav", "song.wav"]
+    assert moves.read_text().startswith("[styles.calmer]")
+    names = ["beats.txt", "link.wav", "moves.toml", "song.wav"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == names
 
 
 def test_an_unwritable_folder_is_refused_before_any_output(tmp_path, monkeypatch) -> None:

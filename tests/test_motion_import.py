@@ -416,6 +416,9 @@ def test_bvh_left_foot_lifts_by_the_right_amount(tmp_path):
 
     motion = load_motion(path)
     assert motion.fps == 24.0
+    bom = tmp_path / "bom"  # a byte-order mark, and no suffix: found by its first bytes
+    bom.write_bytes(b"\xef\xbb\xbf" + path.read_bytes())
+    np.testing.assert_array_equal(load_motion(bom).feet_m, motion.feet_m)
     lifted = hip_deg > 0
     # 90 cm leg raised 60 degrees: the ankle rises 45 cm = 0.45 m; the right foot stays down.
     np.testing.assert_allclose(motion.feet_m[lifted, 0], 0.45, atol=1e-6)

@@ -280,7 +280,12 @@ class ChoreographJob:
 
 def dance_inputs(song: Path | None, motion: Path | None, spec: DanceSpec) -> dict[str, Path | None]:
     """The files a dance is made from, by the option that names them (None: not given)."""
-    return {"SONG": song, "--motion": motion, "--beats": spec.beats.path if spec.beats else None}
+    return {
+        "SONG": song,
+        "--motion": motion,
+        "--beats": spec.beats.path if spec.beats else None,
+        "--moves": spec.moves.path if spec.moves else None,
+    }
 
 
 def run_choreograph(job: ChoreographJob) -> tuple[Dance, Analysis | None]:

@@ -27,6 +27,7 @@ This module must not import librosa or `quaddance.music`.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Literal
 
 import numpy as np
@@ -150,6 +151,7 @@ class MoveSet:
     body_moves: tuple[BodyMove, ...] = BODY_MOVES
     styles: dict[str, dict[str, float]] = field(default_factory=dict)
     source: str = "built-in"
+    path: Path | None = field(default=None, compare=False)  #: the --moves file, if any
 
     def body_style(self, style: str) -> dict[str, float]:
         if style in self.styles:

@@ -340,7 +340,8 @@ def load_bvh(
         raise InputFileError(path, f"cannot be read ({err.strerror or err})") from None
     if len(raw) > MAX_BVH_BYTES:
         raise InputFileError(path, f"is larger than {MAX_BVH_BYTES >> 20} MB, too big a motion")
-    text = raw.decode("utf-8", errors="replace")
+    # utf-8-sig: a byte-order mark, as Windows editors write, is not part of the text.
+    text = raw.decode("utf-8-sig", errors="replace")
     del raw
     # [ \t], not \s: "\s*" can run over newlines and made this search quadratic in blank lines
     # (100 000 of them took a minute).

@@ -435,7 +435,7 @@ def _sniff(path: Path) -> str | None:
             head = f.read(16)
     except OSError as err:
         raise InputFileError(path, f"cannot be read ({err.strerror or err})") from None
-    if head.lstrip().upper().startswith(b"HIERARCHY"):
+    if head.removeprefix(b"\xef\xbb\xbf").lstrip().upper().startswith(b"HIERARCHY"):
         return "bvh"
     if head[:1] == b"\x80":  # PROTO opcode: every pickle of protocol 2 or later starts so
         return "pickle"

@@ -130,7 +130,7 @@ def load_moves(path: str | Path, limits: BodyLimits = GO1.body_four_feet) -> Mov
     if path.stat().st_size > MAX_MOVES_FILE_BYTES:
         raise InputFileError(path, f"is larger than {MAX_MOVES_FILE_BYTES >> 20} MB")
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        data = tomllib.loads(path.read_text(encoding="utf-8-sig"))  # a BOM is not TOML
     except UnicodeDecodeError:
         raise InputFileError(path, "is not UTF-8 text") from None
     except tomllib.TOMLDecodeError as err:
@@ -162,7 +162,14 @@ def load_moves(path: str | Path, limits: BodyLimits = GO1.body_four_feet) -> Mov
                 )
             _number(path, f"styles.{style}.{move}", weight, 0.0, 1e3)
         styles[style] = {k: float(v) for k, v in weights.items()}
-    return MoveSet(body_moves=body_moves, styles=styles, source=path.name)
+        # A paw move the style does not name keeps weight 1 (`choreographer.choreograph`).
+        if all(styles[style].get(m.name, 1.0) == 0.0 for m in MOVES):
+            raise InputFileError(
+                path,
+                f"styles.{style} gives every paw move weight 0; give one a weight above 0 "
+                "(hold keeps the paws down)",
+            )
+    return MoveSet(body_moves=body_moves, styles=styles, source=path.name, path=path)
 
 
 __all__ = ["BODY_STYLES", "load_moves"]

@@ -295,7 +295,7 @@ def _run_dance(
     render = stream.finish() if stream is not None else None
 
     t0 = time.perf_counter()
-    title = f"{Path(dance.source).name} - {policy_path.name}"
+    title = f"{dance.source} - {policy_path.name}"  # sources name files, not paths
     measured = result.body_measured(policy.task.base_height_target_m)
     paths["plot"] = plot_feet(
         out / "feet.png",

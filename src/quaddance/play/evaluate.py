@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from quaddance.errors import QuaddanceError
-from quaddance.fileio import atomic_path, write_json
+from quaddance.fileio import atomic_path, check_distinct, check_output_file, write_json
 from quaddance.play.policy import policy_label
 from quaddance.play.rollout import PinnedDynamics
 
@@ -122,6 +122,37 @@ def evaluate_items(
     return rows
 
 
+def report_outputs(report: Path) -> dict[str, Path]:
+    """The files an evaluation writes, by what they are: the report and beside it its JSON
+    and plot."""
+    return {
+        "--report": report,
+        "the report's .json": report.with_suffix(".json"),
+        "the report's .png": report.with_suffix(".png"),
+    }
+
+
+def check_eval_files(items: Sequence[Path], report: Path) -> None:
+    """Everything that can be checked before the work, so that a bad file fails in a moment
+    and not after the items before it were danced: the outputs (writable, none an input
+    item, none another output: ``-o x.png`` would be its own plot), and each motion file
+    (read as the dance will read it; songs are checked when decoded).
+
+    Raises:
+        OutputFileError: an output cannot be written or collides with an input or an output.
+        InputFileError: a motion file cannot be read.
+    """
+    from quaddance.choreo.motion import load_motion
+
+    outputs = report_outputs(report)
+    for path in outputs.values():
+        check_output_file(path)
+    check_distinct(outputs, {f"item {item.name}": item for item in items})
+    for item in items:
+        if item.suffix.lower() in MOTION_EXT:
+            load_motion(item)
+
+
 def evaluate(
     items: Sequence[Path],
     policy: Path | None,
@@ -135,6 +166,7 @@ def evaluate(
     ``settings``) and a plot (``.png``)."""
     from quaddance.play.plots import plot_eval
 
+    check_eval_files(items, report)
     rows = evaluate_items(items, policy, settings, progress)
     plot_path = report.with_suffix(".png")
     plot_eval(plot_path, rows)

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from quaddance.errors import QuaddanceError
-from quaddance.fileio import atomic_path
+from quaddance.fileio import atomic_path, ensure_dir
 
 HELD_OUT_SETS: tuple[str, ...] = ("generator", "other")
 
@@ -558,7 +558,7 @@ def write_held_out_set(
         raise QuaddanceError(
             f"unknown held-out set {which!r}: use one of {', '.join(HELD_OUT_SETS)}"
         )
-    folder.mkdir(parents=True, exist_ok=True)
+    ensure_dir(folder)  # a file in its place is one line, not a FileExistsError
     if which == "generator":
         return write_generator_set(folder, duration_s)
     return write_other_set(folder, duration_s)

@@ -395,9 +395,13 @@ def body_and_coverage(
 ) -> dict[str, Any]:
     """`whole_body_metrics` over plain arrays (what `dance` sends to its helper process):
     ``feet_m`` (T, 4) measured foot heights, ``body_targets`` and ``body_measured`` (T, 4)."""
-    from quaddance.choreo.accents import beat_coverage, motion_accents_s
+    from quaddance.choreo.accents import BEAT_TOLERANCE_S, beat_coverage, motion_accents_s
 
     accents = motion_accents_s(time_s, feet_m, body_measured)
+    if len(time_s):  # the beats the dance spans: a motion may end before the song does
+        beats_s = beats_s[
+            (beats_s >= time_s[0] - BEAT_TOLERANCE_S) & (beats_s <= time_s[-1] + BEAT_TOLERANCE_S)
+        ]
     return {
         "body": body_metrics(body_targets, body_measured),
         # None without music beats (a motion file alone): nothing to cover.

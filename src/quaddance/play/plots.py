@@ -5,6 +5,7 @@ Matplotlib with the Agg backend (no display needed); files are written atomicall
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -131,7 +132,7 @@ def plot_feet(
         if len(time):
             ax.set_xlim(time[0], time[-1])
     if title:
-        fig.suptitle(title)
+        fig.suptitle(textwrap.fill(title, 100))  # a motion's source can be long
     save_figure(fig, path)
     return Path(path)
 
