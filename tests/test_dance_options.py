@@ -6,12 +6,13 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
+import sys
 from types import SimpleNamespace
 
 import pytest
 from typer.testing import CliRunner
 
-from quaddance.cli import app
+from quaddance.cli import app, main
 from quaddance.deploy.job import DeployJob, run_deploy
 from quaddance.errors import QuaddanceError
 from quaddance.live import session
@@ -119,3 +120,29 @@ def test_live_plans_its_spec_in_the_policy_s_range(monkeypatch, tmp_path, policy
     spec = ran.value.args[0]["dance"]
     assert (spec.style, spec.seed, spec.mode) == ("energetic", 2, "minmax")
     assert spec.targets.max_height_m == policy_max_height_m
+
+
+@pytest.mark.parametrize("command", ["choreograph", "dance"])
+@pytest.mark.parametrize(
+    ("flags", "named"),
+    [
+        (["--style", "calm"], "--style"),
+        (["--seed", "3"], "--seed"),
+        (["--moves", "m.toml"], "--moves"),
+    ],
+)
+def test_choreographer_options_with_a_motion_are_a_usage_error(
+    tmp_path, monkeypatch, capsys, command, flags, named
+):
+    """A motion brings its own moves: --style, --seed and --moves changed nothing with it,
+    silently (the targets were identical)."""
+    (tmp_path / "m.toml").write_text("[styles.calmer]\nhold = 2.0\n")
+    flags = [str(tmp_path / f) if f.endswith(".toml") else f for f in flags]
+    motion = tmp_path / "walk.bvh"
+    motion.write_text("HIERARCHY\n")
+    monkeypatch.setattr(sys, "argv", ["quaddance", command, "--motion", str(motion), *flags])
+    with pytest.raises(SystemExit) as exc:
+        main()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert exc.value.code == 2 and len(err) == 1, err
+    assert f"{named} chooses the choreographer's dance; --motion brings its own moves" in err[0]

@@ -48,14 +48,21 @@ def dance_spec(
     """The `DanceSpec` of the dance options, with ``targets``' other settings (its robot
     among them). The moves file and the ``--beats`` file are read here (the moves against
     that robot's trunk range), so that a bad one fails before any work. ``timed``: the
-    command's options that bring their own timing (``{"--motion": path}``): ``--beats``
-    with one of them is a usage error."""
+    command's options that bring their own timing and moves (``{"--motion": path}``):
+    ``--beats``, ``--style``, ``--seed`` or ``--moves`` with one of them is a usage error."""
     from quaddance.layout import MODES
     from quaddance.pipeline import DanceSpec
     from quaddance.targets import TargetConfig
 
     if mode not in MODES:
         raise typer.BadParameter(f"--mode must be one of {', '.join(MODES)}, got {mode!r}")
+    given = [name for name, path in (timed or {}).items() if path is not None]
+    asked = {"--style": style != "mixed", "--seed": seed != 0, "--moves": moves is not None}
+    chosen = [name for name, yes in asked.items() if yes]
+    if given and chosen:  # they would change nothing, silently
+        raise typer.BadParameter(
+            f"{chosen[0]} chooses the choreographer's dance; {given[0]} brings its own moves"
+        )
     targets = dataclasses.replace(targets or TargetConfig(), mode=mode)
     move_set = None
     if moves is not None:
@@ -64,7 +71,6 @@ def dance_spec(
         move_set = load_moves(moves, targets.robot.body_four_feet)
     beat_list = None
     if beats is not None:
-        given = [name for name, path in (timed or {}).items() if path is not None]
         if given:
             raise typer.BadParameter(f"--beats gives a SONG's beats: not with {given[0]}")
         from quaddance.music.beat_file import read_beats
