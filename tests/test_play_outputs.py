@@ -524,6 +524,14 @@ def test_learning_curve_plot_from_a_curve_csv(tmp_path) -> None:
     empty.write_text("iteration,env_steps\n")
     with pytest.raises(QuaddanceError, match="no rows"):
         plot_learning_curve(tmp_path / "x.png", empty)
+    # After one iteration (`train --iterations 1`): a point, and no matplotlib warning.
+    one = tmp_path / "one.csv"
+    one.write_text("\n".join(lines[:2]) + "\n")
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert plot_learning_curve(tmp_path / "one.png", one).stat().st_size > 10_000
 
 
 def test_finite_planes_bound_an_infinite_floor_for_drawing_only() -> None:

@@ -260,22 +260,24 @@ def plot_learning_curve(path: str | Path, curve_csv: str | Path) -> Path:
         ("fall_rate", 1.0, "falls per ended episode"),
         ("rear_lift_m", 100.0, "rear-foot lift (cm)"),
     ]
+    marker = "o" if len(rows) == 1 else ""  # one iteration: a point, not a line
     for ax, (key, scale, label) in zip(axes, series, strict=True):
         ax.plot(steps_m, col[key] * scale, color="0.75", lw=0.8)
         k = max(1, len(rows) // 50)  # running mean over about 2 % of the run
         smooth = np.convolve(col[key] * scale, np.ones(k) / k, mode="valid")
-        ax.plot(steps_m[k - 1 :], smooth, color="tab:blue", lw=1.6)
+        ax.plot(steps_m[k - 1 :], smooth, color="tab:blue", lw=1.6, marker=marker)
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
     axes[-1].set_xlabel("env steps (millions)")
-    top = axes[0].secondary_xaxis(
-        "top",
-        functions=(
-            lambda s: np.interp(s, steps_m, col["wall_s"] / 60.0),
-            lambda m: np.interp(m, col["wall_s"] / 60.0, steps_m),
-        ),
-    )
-    top.set_xlabel("wall-clock minutes of training")
+    if len(rows) > 1:  # minutes against steps needs two points
+        top = axes[0].secondary_xaxis(
+            "top",
+            functions=(
+                lambda s: np.interp(s, steps_m, col["wall_s"] / 60.0),
+                lambda m: np.interp(m, col["wall_s"] / 60.0, steps_m),
+            ),
+        )
+        top.set_xlabel("wall-clock minutes of training")
     fig.tight_layout()
     save_figure(fig, path)
     return Path(path)
