@@ -716,7 +716,14 @@ def _truncate_curve(path: Path, iteration: int) -> None:
     if not path.exists():
         return
     lines = path.read_text().splitlines(keepends=True)
-    keep = lines[:1] + [ln for ln in lines[1:] if int(float(ln.split(",", 1)[0])) <= iteration]
+
+    def up_to(line: str) -> bool:
+        try:
+            return int(float(line.split(",", 1)[0])) <= iteration
+        except ValueError:  # a row cut short by the kill
+            return False
+
+    keep = lines[:1] + [ln for ln in lines[1:] if up_to(ln)]
     if len(keep) < len(lines):
         with atomic_path(path) as tmp:
             tmp.write_text("".join(keep))
