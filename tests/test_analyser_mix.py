@@ -87,3 +87,19 @@ def test_a_set_not_built_stops_the_grid_before_any_song_is_scored(
         am.main(["--also", str(tmp_path / "missing"), "--out", str(tmp_path / "mix.json")])
     assert read == []
     assert not (tmp_path / "mix.json").exists()
+
+
+def test_a_mix_at_another_level_hears_the_song_that_much_quieter(monkeypatch) -> None:
+    heard: list[float] = []
+
+    def analyze(y: np.ndarray, sr: int, cfg: object) -> object:
+        heard.append(float(np.max(np.abs(y))))
+        raise RuntimeError("heard")
+
+    monkeypatch.setattr(am.analysis, "analyze", analyze)
+    y = np.array([0.0, 0.8, -0.4], dtype=np.float32)
+    for mix in (am.Mix(0.25, 0.75), am.Mix(0.25, 0.75, gain_db=-6.0)):
+        with pytest.raises(RuntimeError, match="heard"):
+            am.score(None, y, mix)  # type: ignore[arg-type]
+    assert heard == pytest.approx([0.8, 0.8 * 10 ** (-6 / 20)], rel=1e-6)
+    assert am.Mix(0.25, 0.75, am.FIVE, gain_db=-6.0).name.endswith(", at -6 dB")
