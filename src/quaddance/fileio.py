@@ -86,20 +86,22 @@ def _same_file(a: Path, b: Path) -> bool:
         return Path(os.path.realpath(a)) == Path(os.path.realpath(b))
 
 
-def check_distinct(outputs: dict[str, Path], inputs: dict[str, Path | None]) -> None:
-    """Refuse an output that is one of the inputs, or two outputs that are one file: the
-    input would be replaced, or one output would be lost under the other.
+def check_outputs(outputs: dict[str, Path], inputs: dict[str, Path | None]) -> None:
+    """Check each output as `check_output_file` does, and refuse an output that is one of the
+    inputs, or two outputs that are one file: the input would be replaced, or one output
+    would be lost under the other. Call it before the work.
 
     Args:
         outputs: each output path by the option that names it (for the message).
         inputs: each input path by its option; None where not given.
 
     Raises:
-        OutputFileError: naming the output and what it collides with.
+        OutputFileError: naming the output and what is wrong with it.
     """
     given = {what: path for what, path in inputs.items() if path is not None}
     seen: dict[str, Path] = {}
     for what, out in outputs.items():
+        check_output_file(out)
         for in_what, path in given.items():
             if _same_file(out, path):
                 raise OutputFileError(

@@ -26,7 +26,7 @@ from quaddance.choreo.choreographer import STYLES, choreograph
 from quaddance.choreo.grid import MusicGrid, synthetic_grid
 from quaddance.dancefile import Dance, save_dance
 from quaddance.errors import QuaddanceError, not_a_file
-from quaddance.fileio import check_distinct, check_output_file
+from quaddance.fileio import check_outputs
 from quaddance.layout import (
     BODY,
     BODY_COLUMNS,
@@ -298,8 +298,7 @@ def run_choreograph(job: ChoreographJob) -> tuple[Dance, Analysis | None]:
         if path is not None and not path.is_file():
             raise not_a_file(path)
     if not job.check:
-        check_output_file(job.out)
-        check_distinct({"--out": job.out}, dance_inputs(job.song, job.motion, job.spec))
+        check_outputs({"--out": job.out}, dance_inputs(job.song, job.motion, job.spec))
     dance, analysis = make_dance(job.song, job.motion, job.spec)
     if not job.check:
         save_dance(job.out, dance)

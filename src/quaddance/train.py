@@ -289,7 +289,12 @@ def read_checkpoint(path: Path, device: str = "cpu") -> dict:
     return state
 
 
-def run_start(cfg: TrainCfg) -> tuple[dict | None, dict | None]:
+RunStart = tuple[dict | None, dict | None]
+"""What `run_start` read: (the state ``--resume`` continues, the state ``--init-from`` starts
+from)."""
+
+
+def run_start(cfg: TrainCfg) -> RunStart:
     """Check the run folder and read the checkpoint the run starts from, before anything is
     built or written: (the state ``--resume`` continues, the state ``--init-from`` starts
     from); None where not asked for.
@@ -335,7 +340,15 @@ def _resumable(cfg: TrainCfg, path: Path) -> dict:
 class Trainer:
     """Owns the env, the PPO algorithm and the run directory."""
 
-    def __init__(self, cfg: TrainCfg, bank: np.ndarray | None = None, log=print) -> None:
+    def __init__(
+        self,
+        cfg: TrainCfg,
+        bank: np.ndarray | None = None,
+        log=print,
+        start: RunStart | None = None,
+    ) -> None:
+        """``bank``: a target bank already built (None: `build_bank`); ``start``: what
+        `run_start` read for ``cfg`` already (None: read it here)."""
         from quaddance.sim.task import DanceEnv
 
         self.cfg = cfg
@@ -352,7 +365,7 @@ class Trainer:
             torch.set_num_threads(cfg.torch_threads)
         torch.manual_seed(cfg.seed)
         self.ckpt_path = cfg.run_dir / "checkpoint.pt"
-        resumed, started_from = run_start(cfg)
+        resumed, started_from = run_start(cfg) if start is None else start
         cfg.run_dir.mkdir(parents=True, exist_ok=True)
         self.bank = build_bank(cfg) if bank is None else bank
         self.env = DanceEnv(copy.deepcopy(cfg.task), self.bank, engine=cfg.engine, seed=cfg.seed)
@@ -769,11 +782,15 @@ def _progress_bar(enabled: bool):
 
 
 def train(
-    cfg: TrainCfg, progress: bool = True, log=print, bank: np.ndarray | None = None
+    cfg: TrainCfg,
+    progress: bool = True,
+    log=print,
+    bank: np.ndarray | None = None,
+    start: RunStart | None = None,
 ) -> Trainer:
-    """Train (or continue) and export; returns the trainer. `bank`: a target bank already
-    built (None: `build_bank`)."""
-    trainer = Trainer(cfg, bank=bank, log=log)
+    """Train (or continue) and export; returns the trainer. ``bank`` and ``start`` as
+    `Trainer` takes them."""
+    trainer = Trainer(cfg, bank=bank, log=log, start=start)
     todo = cfg.iterations - trainer.iteration if cfg.resume else cfg.iterations
     if todo > 0:
         trainer.learn(todo, progress=progress)

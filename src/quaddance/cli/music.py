@@ -35,17 +35,16 @@ def analyze_cmd(
     """Find the tempo, beats, downbeats, sections and envelopes of a song; write them as JSON."""
     from rich.console import Console
 
-    from quaddance.fileio import check_distinct, check_output_file
+    from quaddance.fileio import check_outputs
     from quaddance.music.analysis import analyze_file
     from quaddance.music.audio import check_audio_output, load_audio, write_audio
     from quaddance.music.click import with_clicks
     from quaddance.music.live import track_file
 
     # Outputs are checked before the work, not after it.
-    check_output_file(out)
     if click is not None:
         check_audio_output(click)
-    check_distinct({"--out": out, "--click": click} if click else {"--out": out}, {"SONG": song})
+    check_outputs({"--out": out, "--click": click} if click else {"--out": out}, {"SONG": song})
     with Console(stderr=True).status(f"Analysing {song.name}..."):
         result = track_file(song) if online else analyze_file(song)
     result.save_json(out)

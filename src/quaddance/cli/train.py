@@ -194,10 +194,10 @@ def train_cmd(
         from quaddance.fileio import ensure_dir
         from quaddance.train import build_bank, run_start
 
-        run_start(cfg)  # a bad checkpoint or run folder fails before the bank is built
+        start = run_start(cfg)  # a bad checkpoint or run folder fails before the bank is built
         ensure_dir(run_dir)
         bank = build_bank(cfg)
-    trainer = train(cfg, log=console.print, progress=progress, bank=bank)
+    trainer = train(cfg, log=console.print, progress=progress, bank=bank, start=start)
     console.print(
         f"done: {trainer.iteration} iterations, {trainer.env_steps:,} env steps, "
         f"{trainer.wall_s / 60:.1f} min; policy -> {run_dir / 'policy.onnx'}"

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from quaddance.errors import InputFileError, OutputFileError
+from quaddance.errors import InputFileError, OutputFileError, not_a_file
 
 DEFAULT_SR = 22050
 """Analysis sample rate, Hz (librosa's default: enough for beats, 2x cheaper than 44.1 kHz)."""
@@ -82,12 +82,8 @@ def load_audio(
     import soundfile as sf
 
     path = Path(path)
-    if not path.exists():
-        raise InputFileError(path, "no such file")
-    if path.is_dir():
-        raise InputFileError(path, "is a directory, not an audio file")
     if not path.is_file():
-        raise InputFileError(path, "is not a regular file")
+        raise not_a_file(path)
     suffix = path.suffix.lower()
     if suffix not in SUPPORTED_SUFFIXES:
         raise InputFileError(

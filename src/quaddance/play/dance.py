@@ -15,13 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 from quaddance.dancefile import Dance, save_dance
 from quaddance.errors import QuaddanceError, not_a_file
-from quaddance.fileio import (
-    check_distinct,
-    check_output_file,
-    ensure_dir,
-    remove_empty_dir,
-    write_json,
-)
+from quaddance.fileio import check_outputs, ensure_dir, remove_empty_dir, write_json
 from quaddance.pipeline import DanceSpec, dance_inputs, make_dance
 
 if TYPE_CHECKING:
@@ -228,10 +222,10 @@ def _run_dance(
     policy = OnnxPolicy.load(policy_path)
     spec = spec_for_policy(job.spec, policy)
     out = ensure_dir(job.out_dir)
-    outputs = {name: out / name for name in OUTPUT_NAMES}
-    for path in outputs.values():
-        check_output_file(path)  # refuse a FIFO or device before the work, not after
-    check_distinct(outputs, dance_inputs(job.song, job.motion, job.spec))
+    # A FIFO, a device or an input where an output goes: refused before the work, not after.
+    check_outputs(
+        {name: out / name for name in OUTPUT_NAMES}, dance_inputs(job.song, job.motion, job.spec)
+    )
     timings: dict[str, float] = {}
 
     status("analysing the music and choreographing")

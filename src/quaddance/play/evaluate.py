@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from quaddance.errors import QuaddanceError
-from quaddance.fileio import atomic_path, check_distinct, check_output_file, write_json
+from quaddance.fileio import atomic_path, check_outputs, write_json
 from quaddance.play.policy import policy_label
 from quaddance.play.rollout import PinnedDynamics
 
@@ -144,10 +144,7 @@ def check_eval_files(items: Sequence[Path], report: Path) -> None:
     """
     from quaddance.choreo.motion import load_motion
 
-    outputs = report_outputs(report)
-    for path in outputs.values():
-        check_output_file(path)
-    check_distinct(outputs, {f"item {item.name}": item for item in items})
+    check_outputs(report_outputs(report), {f"item {item.name}": item for item in items})
     for item in items:
         if item.suffix.lower() in MOTION_EXT:
             load_motion(item)
