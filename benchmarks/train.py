@@ -90,6 +90,62 @@ def mjlab_go1(num_envs: int, steps: int, device: str) -> float | None:
         return None
 
 
+def noisy_home(model, n: int, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """(n, nq) home poses with joint noise and (n, nv) small random velocities."""
+    gen = torch.Generator().manual_seed(seed)
+    qpos = torch.tensor(model.key("home").qpos, dtype=torch.float32).repeat(n, 1)
+    qpos[:, 7:] += (torch.rand(n, model.nq - 7, generator=gen) * 2 - 1) * 0.1
+    qvel = (torch.rand(n, model.nv, generator=gen) * 2 - 1) * 0.2
+    return qpos, qvel
+
+
+def random_controls(n: int, steps: int, seed: int, substeps: int = 4) -> torch.Tensor:
+    """(steps, n, substeps, 12) Go1 joint targets around the nominal pose, rad."""
+    from quaddance.robots import GO1
+
+    gen = torch.Generator().manual_seed(seed)
+    nominal = torch.tensor(GO1.nominal_joint_pos_rad)
+    noise = (torch.rand(steps, n, substeps, GO1.num_joints, generator=gen) * 2 - 1) * 0.3
+    return nominal + noise
+
+
+def engine_gaps(
+    rows: np.ndarray, variant_idx: list[int], steps: int = 20, warp_device: str = "cpu"
+) -> tuple[float, float]:
+    """Largest |qpos| (m, rad) and |sensordata| gaps between the MuJoCo Warp engine on
+    ``warp_device`` and the CPU engine, over ``steps`` policy steps of the same controls from
+    the same noisy poses, with the dynamics variants ``rows`` (one per env by ``variant_idx``)."""
+    from quaddance.sim.engines import CpuEngine
+    from quaddance.sim.warp_engine import WarpEngine
+
+    n = len(variant_idx)
+    gpu = WarpEngine(n, variants=rows, device=warp_device)
+    cpu = CpuEngine(n, variants=rows)
+    ids = torch.arange(n)
+    gpu.set_variants(ids, torch.tensor(variant_idx))
+    cpu.set_variants(ids.numpy(), np.array(variant_idx))
+    qpos, qvel = noisy_home(cpu.model, n, seed=11)
+    gpu.reset(ids, qpos, qvel)
+    cpu.reset(ids, qpos, qvel)
+    gaps_q, gaps_s = [], []
+    for ctrl in random_controls(n, steps, seed=12):
+        a, b = gpu.step(ctrl.to(gpu.device)), cpu.step(ctrl)
+        gaps_q.append((a.qpos.cpu() - b.qpos).abs().max().item())
+        gaps_s.append((a.sensordata.cpu() - b.sensordata).abs().max().item())
+    return max(gaps_q), max(gaps_s)
+
+
+# Friction, added trunk mass (kg), motor strength: the variants the engine test uses.
+AGREEMENT_VARIANTS = np.array([[1.0, 0.0, 1.0], [1.0, 2.0, 1.1], [0.4, -1.0, 0.9]])
+
+
+def engine_agreement(warp_device: str, steps: int = 50) -> dict[str, float]:
+    """`engine_gaps` over 8 envs with the three variants: what the GPU engine's physics
+    differs by from the CPU engine's on this device."""
+    gap_q, gap_s = engine_gaps(AGREEMENT_VARIANTS, [0, 1, 2, 1, 0, 2, 1, 0], steps, warp_device)
+    return {"device": warp_device, "steps": steps, "max_qpos_gap": gap_q, "max_sensor_gap": gap_s}
+
+
 def _sync(device: torch.device) -> None:
     if device.type == "cuda":
         torch.cuda.synchronize()
@@ -115,6 +171,10 @@ def run_train_bench(
         },
         "by_num_envs": {},
     }
+    if engine == "gpu":
+        warp_device = "cuda:0" if torch.cuda.is_available() else "cpu"
+        results["engine_agreement"] = engine_agreement(warp_device)
+        print(f"engine agreement: {results['engine_agreement']}")
     for n in env_counts:
         row = {"env_only_steps_per_s": env_only(engine, n, env_steps)}
         row.update({f"ppo_{k}": v for k, v in end_to_end(engine, preset, n, iterations).items()})

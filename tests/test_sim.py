@@ -12,6 +12,7 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
+from benchmarks.train import engine_gaps, noisy_home, random_controls
 from quaddance.robots import GO1
 from quaddance.sim import rewards, tasks, terminations
 from quaddance.sim.config import DanceTaskCfg, RewardTerm
@@ -46,23 +47,6 @@ def task_cfg(num_envs: int, **kwargs) -> DanceTaskCfg:
 
 def flat_bank(length: int = 200) -> np.ndarray:
     return np.zeros((1, length, 4), np.float32)
-
-
-def noisy_home(model: mujoco.MjModel, n: int, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """(n, nq) home poses with joint noise and (n, nv) small random velocities."""
-    gen = torch.Generator().manual_seed(seed)
-    qpos = torch.tensor(model.key("home").qpos, dtype=torch.float32).repeat(n, 1)
-    qpos[:, 7:] += (torch.rand(n, GO1.num_joints, generator=gen) * 2 - 1) * 0.1
-    qvel = (torch.rand(n, model.nv, generator=gen) * 2 - 1) * 0.2
-    return qpos, qvel
-
-
-def random_controls(n: int, steps: int, seed: int) -> torch.Tensor:
-    """(steps, n, 4, 12) joint targets around the nominal pose, rad."""
-    gen = torch.Generator().manual_seed(seed)
-    nominal = torch.tensor(GO1.nominal_joint_pos_rad)
-    noise = (torch.rand(steps, n, 4, GO1.num_joints, generator=gen) * 2 - 1) * 0.3
-    return nominal + noise
 
 
 @pytest.fixture(scope="module")
@@ -498,23 +482,16 @@ def warp_engine_cls():
     return WarpEngine
 
 
-def run_both_engines(warp_engine_cls, rows, variant_idx, steps=20):
-    """Largest |qpos| and |sensordata| gaps between the engines over `steps` policy steps."""
-    n = len(variant_idx)
-    gpu = warp_engine_cls(n, variants=rows, device="cpu")
-    cpu = CpuEngine(n, variants=rows)
-    ids = torch.arange(n)
-    gpu.set_variants(ids, torch.tensor(variant_idx))
-    cpu.set_variants(ids.numpy(), np.array(variant_idx))
-    qpos, qvel = noisy_home(cpu.model, n, seed=11)
-    gpu.reset(ids, qpos, qvel)
-    cpu.reset(ids, qpos, qvel)
-    gaps_q, gaps_s = [], []
-    for ctrl in random_controls(n, steps, seed=12):
-        a, b = gpu.step(ctrl), cpu.step(ctrl)
-        gaps_q.append((a.qpos - b.qpos).abs().max().item())
-        gaps_s.append((a.sensordata - b.sensordata).abs().max().item())
-    return max(gaps_q), max(gaps_s)
+@pytest.mark.slow
+def test_warp_engine_memory_grows_linearly_with_the_envs(warp_engine_cls):
+    """mujoco_warp sizes contacts and constraint rows per world: a per-world count that
+    grew with the env count made 4096 envs ask for 4096 x 4096 x 16 contacts."""
+    from quaddance.sim.warp_engine import CONTACTS_PER_WORLD, ROWS_PER_WORLD
+
+    small, large = (warp_engine_cls(n, device="cpu") for n in (2, 8))
+    assert small.d.naconmax == 2 * CONTACTS_PER_WORLD
+    assert large.d.naconmax == 8 * CONTACTS_PER_WORLD
+    assert small.d.njmax == large.d.njmax == ROWS_PER_WORLD
 
 
 @pytest.mark.slow
@@ -522,7 +499,7 @@ def test_warp_and_mujoco_engines_agree(warp_engine_cls):
     """Warp on the CPU (first run compiles its kernels, 1-2 min) vs mujoco.rollout, with
     added-mass and motor-strength variants."""
     rows = np.array([[1.0, 0.0, 1.0], [1.0, 2.0, 1.1], [1.0, -1.0, 0.9]])
-    gap_qpos, gap_sensors = run_both_engines(warp_engine_cls, rows, [0, 1, 2, 1])
+    gap_qpos, gap_sensors = engine_gaps(rows, [0, 1, 2, 1])
     assert gap_qpos < 1e-4
     assert gap_sensors < 1e-3  # includes joint torques, N m
 
@@ -530,7 +507,7 @@ def test_warp_and_mujoco_engines_agree(warp_engine_cls):
 @pytest.mark.slow
 def test_warp_and_mujoco_engines_agree_with_friction_variants(warp_engine_cls):
     rows = np.array([[1.0, 0.0, 1.0], [0.4, 0.0, 1.0]])
-    gap_qpos, _ = run_both_engines(warp_engine_cls, rows, [1, 1, 1, 1], steps=10)
+    gap_qpos, _ = engine_gaps(rows, [1, 1, 1, 1], steps=10)
     assert gap_qpos < 1e-4
 
 

@@ -489,7 +489,7 @@ class Trainer:
             for _ in range(iterations):
                 t0 = time.monotonic()
                 self.env.curriculum_scale = self.curriculum_now()
-                sums: dict[str, float] = {}
+                sums: dict = {}  # tensors while collecting, floats after
                 ep_reward = torch.zeros(self.env.num_envs, device=self.device)
                 with torch.inference_mode():
                     for _ in range(steps):
@@ -497,8 +497,10 @@ class Trainer:
                         obs, rew, dones, extras = self.env.step(actions)
                         self.alg.process_env_step(obs, rew, dones, extras)
                         ep_reward += rew
+                        # Summed where they are (on a GPU, float() each step would wait)
                         for k, v in extras["log"].items():
-                            sums[k] = sums.get(k, 0.0) + float(v)
+                            sums[k] = sums.get(k, 0.0) + v
+                    sums = {k: float(v) for k, v in sums.items()}
                     self.alg.compute_returns(obs)
                 t1 = time.monotonic()
                 losses = self.alg.update()

@@ -22,6 +22,8 @@ from quaddance.sim.state import SensorLayout
 
 # Model fields that differ per world (domain randomisation).
 _BATCHED = ("geom_friction", "body_mass", "actuator_gainprm", "actuator_biasprm")
+CONTACTS_PER_WORLD = 32
+ROWS_PER_WORLD = 160
 
 
 class WarpEngine:
@@ -57,8 +59,11 @@ class WarpEngine:
         mujoco.mj_forward(mjm, mjd)
         with wp.ScopedDevice(wp_device):
             self.m = mjw.put_model(mjm, batch_sizes=dict.fromkeys(_BATCHED, num_envs))
-            # Contacts per world: 4 feet plus a few body parts when falling.
-            self.d = mjw.put_data(mjm, mjd, nworld=num_envs, nconmax=16 * num_envs, njmax=64)
+            # Both per world. Contacts: 4 feet plus body parts when fallen (a world may
+            # borrow from the others' share); constraint rows: 4 per contact plus joint limits.
+            self.d = mjw.put_data(
+                mjm, mjd, nworld=num_envs, nconmax=CONTACTS_PER_WORLD, njmax=ROWS_PER_WORLD
+            )
         t = wp.to_torch
         self.qpos, self.qvel = t(self.d.qpos), t(self.d.qvel)
         self.sensordata = t(self.d.sensordata)
@@ -74,7 +79,7 @@ class WarpEngine:
             "gain": self._gain[0].clone(),
             "bias": self._bias[0].clone(),
         }
-        self._contact_geoms = torch.as_tensor(robot_collision_geoms(mjm))
+        self._contact_geoms = torch.as_tensor(robot_collision_geoms(mjm), device=self.device)
         self._trunk = mjm.body(scene.robot.trunk_body).id
         rows = nominal_dynamics(scene) if variants is None else np.asarray(variants)
         self.variants = rows
