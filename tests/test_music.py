@@ -207,6 +207,22 @@ def test_silence_has_no_beats() -> None:
     assert result.beats_s.size == 0 and result.sections_s.tolist() == [0.0]
 
 
+def test_a_files_level_does_not_move_its_beats_downbeats_or_sections() -> None:
+    """A song heard 3 dB quieter, or 20 dB, is analysed as the song itself: before the
+    analysis heard every file at one level, 3 dB moved beats by a frame and moved sections,
+    and the dance, whose seed mixes in the beat times, with them."""
+    y, _ = render_song(97.0, 40.0, seed=21, swing=0.3)
+    y = y * np.linspace(0.4, 1.0, len(y), dtype=np.float32)  # a crescendo: peak below 0.9
+    results = [analyze(gain * y, SR) for gain in (1.0, 0.707, 0.1)]
+    first = results[0]
+    assert first.beats_s.size > 40
+    for other in results[1:]:
+        np.testing.assert_array_equal(other.beats_s, first.beats_s)
+        np.testing.assert_array_equal(other.downbeats_s, first.downbeats_s)
+        np.testing.assert_array_equal(other.sections_s, first.sections_s)
+        np.testing.assert_allclose(other.rms_env, first.rms_env, rtol=1e-4, atol=1e-7)
+
+
 # --- decoding ---------------------------------------------------------------------------------
 
 

@@ -49,6 +49,10 @@ from quaddance.music import beat_activation
 
 TEMPO_SPAN_BEATS = 4
 """Beats per span over which `median_beat_period_s` measures the reported tempo."""
+ANALYSIS_PEAK = 0.9
+"""`analyze` hears every file at this peak level, so that a file's level does not move its
+beats, downbeats or sections (a copy 3 dB quieter moved them, and the dance with them). It is
+the level `synth` renders songs at: those are heard as they are."""
 MIN_BEAT_GAP_S = 0.2
 """Beats are at least this far apart, seconds (300 BPM, above any dance tempo): the offline
 analyser and the online tracker (`music.online_beats`) drop a beat that would come sooner
@@ -696,6 +700,7 @@ def analyze(y: np.ndarray, sr: int, cfg: AnalysisConfig | None = None) -> Analys
     y = np.asarray(y, dtype=np.float32)
     if y.ndim != 1:
         raise ValueError(f"y must be mono (1-D), got shape {y.shape}")
+    y = at_analysis_level(y)
     feats = _features(y, sr, cfg)
     fps = feats.fps
     tempo_bpm = _global_tempo(feats.tempo_onset, fps, cfg)
@@ -735,6 +740,15 @@ def analyze(y: np.ndarray, sr: int, cfg: AnalysisConfig | None = None) -> Analys
             "offbeat_shift": offbeat_shift,
         },
     )
+
+
+def at_analysis_level(y: np.ndarray) -> np.ndarray:
+    """``y`` scaled to peak `ANALYSIS_PEAK`; silence, and audio already within 1e-4 of that
+    level (a 16-bit file of a song `synth` made), as it is."""
+    peak = float(np.max(np.abs(y))) if y.size else 0.0
+    if peak == 0.0 or abs(peak - ANALYSIS_PEAK) <= 1e-4 * ANALYSIS_PEAK:
+        return y
+    return (y * np.float32(ANALYSIS_PEAK / peak)).astype(np.float32)
 
 
 def median_beat_period_s(beats_s: np.ndarray) -> float:
