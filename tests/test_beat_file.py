@@ -219,3 +219,47 @@ def test_choreograph_and_deploy_dance_to_the_file_s_beats(monkeypatch, capsys, t
     assert code == 0
     np.testing.assert_allclose(made[0].beats_s, beats_s)
     assert made[0].source.endswith("beats of beats.txt")
+
+
+def _beats(times) -> BeatList:
+    return BeatList(Path("b.txt"), tuple(float(t) for t in times))
+
+
+def test_beats_that_span_the_song_in_the_dance_range_have_no_notes():
+    assert _beats(np.arange(0.4, 29.9, 0.5)).notes(30.0) == []
+    assert _beats(np.arange(14.0, 44.0, 1.0)).notes(58.0) == []  # 14 s before, 15 s after
+
+
+@pytest.mark.parametrize(
+    ("times", "duration_s", "words"),
+    [
+        (np.arange(0.0, 30.0, 0.25), 30.0, "its beats run at 240 BPM, outside the dance range "
+         "60-180 BPM; they are danced as they are (give every second beat"),
+        (np.arange(0.0, 30.0, 5.0), 30.0, "its beats run at 12 BPM, outside the dance range "
+         "60-180 BPM; they are danced as they are (give a beat between each two"),
+        (np.arange(0.5, 4.6, 0.5), 120.0, "the last beat is at 4.5 s of the 120.0 s song; the "
+         "robot stands still for the last 115.5 s"),
+        (np.arange(20.0, 60.0, 0.5), 60.0, "the first beat is at 20.0 s; the robot stands still "
+         "until then"),
+    ],
+)  # fmt: skip
+def test_beats_off_the_dance_range_or_leaving_the_song_bare_get_a_note(times, duration_s, words):
+    notes = _beats(times).notes(duration_s)
+    assert len(notes) == 1 and notes[0].startswith(f"b.txt: {words}"), notes
+
+
+def test_choreograph_and_dance_say_where_the_beats_leave_the_robot_standing(
+    monkeypatch, capsys, tmp_path, demo_song
+):
+    song, _ = demo_song
+    path = _write(tmp_path, "intro.txt", "\n".join(str(0.5 * k) for k in range(1, 10)))
+    note = "note: intro.txt: the last beat is at 4.5 s of the 30.0 s song; the robot stands "
+    code, err = _quaddance(monkeypatch, capsys, "choreograph", song, "--beats", path,
+                           "-o", tmp_path / "d.npz")  # fmt: skip
+    assert code == 0 and any(line.startswith(note) for line in err), err
+    monkeypatch.setattr("quaddance.cli.dance.exit_without_teardown", lambda: None)
+    code, err = _quaddance(monkeypatch, capsys, "dance", song, "--beats", path, "--no-video",
+                           "--out", tmp_path / "out")  # fmt: skip
+    assert code == 0 and any(line.startswith(note) for line in err), err
+    metrics = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    assert metrics["notes"][0].startswith(note.removeprefix("note: "))

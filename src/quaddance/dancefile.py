@@ -113,6 +113,8 @@ class Dance:
             pitch, yaw (rad); `quaddance.layout.BODY_COLUMNS`. None -> zeros.
         robot: the robot it was made for (`quaddance.robots.RobotCfg.name`).
         clamp_report: what feasible mode clamped (`compose`), or None; not saved.
+        notes: what the user should hear about how the dance was made (a beat file that
+            leaves much of the song without beats, say); not saved.
     """
 
     fps: float
@@ -128,6 +130,7 @@ class Dance:
     body_targets: np.ndarray | None = None
     robot: str = GO1.name
     clamp_report: dict | None = None
+    notes: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if self.body_targets is None:

@@ -128,10 +128,12 @@ def compose(
     """
     cfg = spec.targets
     four_feet = cfg.robot.body_four_feet
+    notes: tuple[str, ...] = ()
     if spec.beats is not None:
         if grid is None:
             raise QuaddanceError(f"{spec.beats.path}: beats from a file need a song")
         spec.beats.check_within(grid.duration_s)
+        notes = tuple(spec.beats.notes(grid.duration_s))
         grid = grid.with_beats(spec.beats.beats_s, spec.beats.downbeats_s)
         music_name += f", beats of {spec.beats.name}"
     if motion is not None:
@@ -175,6 +177,7 @@ def compose(
         body_targets=body_targets,
         robot=cfg.robot.name,
         clamp_report=report,
+        notes=notes,
     )
 
 

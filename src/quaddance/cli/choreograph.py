@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from quaddance.cli._dance_spec import ModeOpt, MovesOpt, SeedOpt, StyleOpt, dance_spec
-from quaddance.cli.options import BeatsOpt, RobotModelOpt, finite_in
+from quaddance.cli.options import BeatsOpt, RobotModelOpt, finite_in, print_notes
 
 
 def choreograph_cmd(
@@ -69,6 +69,8 @@ def choreograph_cmd(
     targets = TargetConfig(h0_m=h0, scale=scale, max_height_m=max_height, robot=robot_cfg)
     spec = dance_spec(mode, style, seed, moves, targets, beats, {"--motion": motion})
     job = ChoreographJob(song=song, motion=motion, out=out, spec=spec, check=check)
-    with Console(stderr=True).status("Analysing the music and choreographing..."):
+    err = Console(stderr=True)
+    with err.status("Analysing the music and choreographing..."):
         dance, analysis = run_choreograph(job)
+    print_notes(err, dance.notes)
     Console().print(clamp_table(dance) if check else dance_table(dance, analysis, out))

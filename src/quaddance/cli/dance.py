@@ -10,7 +10,13 @@ import typer
 
 from quaddance.cli._dance_spec import ModeOpt, MovesOpt, SeedOpt, StyleOpt, policy_dance_spec
 from quaddance.cli._exit import exit_without_teardown
-from quaddance.cli.options import BeatsOpt, PolicyOpt, PolicyRobotOpt, note_earlier_outputs
+from quaddance.cli.options import (
+    BeatsOpt,
+    PolicyOpt,
+    PolicyRobotOpt,
+    note_earlier_outputs,
+    print_notes,
+)
 
 
 def dance_cmd(
@@ -77,6 +83,7 @@ def dance_cmd(
     for name, path in result.paths.items():
         console.print(f"{name}: {path}")
     note_earlier_outputs(console, job.out_dir, OUTPUT_NAMES, result.paths.values())
+    print_notes(console, result.dance.notes)
     console.print(f"took {result.timings_s['total_s']:.1f} s")
     exit_without_teardown()
 

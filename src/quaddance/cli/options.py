@@ -75,6 +75,12 @@ def finite_in(lo: float, hi: float):
     return check
 
 
+def print_notes(console: Any, notes: Iterable[str]) -> None:
+    """One ``note:`` line each, unwrapped and as written (paths are not markup)."""
+    for note in notes:
+        console.print(f"note: {note}", soft_wrap=True, markup=False, highlight=False)
+
+
 def note_earlier_outputs(
     console: Any, out_dir: Path, names: Iterable[str], written: Iterable[Path]
 ) -> None:
@@ -82,10 +88,10 @@ def note_earlier_outputs(
     (`quaddance.fileio.earlier_outputs`)."""
     from quaddance.fileio import earlier_outputs
 
-    for path in earlier_outputs(out_dir, names, written):
-        console.print(
-            f"note: {path} is from an earlier run (this one did not write it)",
-            soft_wrap=True,
-            markup=False,
-            highlight=False,
-        )
+    print_notes(
+        console,
+        (
+            f"{path} is from an earlier run (this one did not write it)"
+            for path in earlier_outputs(out_dir, names, written)
+        ),
+    )

@@ -208,6 +208,8 @@ def run_deploy(job: DeployJob, status: Callable[[str], None] = lambda m: None) -
         else:
             status("analysing the music and choreographing")
             dance, _ = make_dance(song, job.motion, spec)
+            for note in dance.notes:
+                status(f"note: {note}")
         if abs(dance.fps - policy.task.policy_hz) > 1e-6:
             raise InputFileError(
                 job.dance or song or job.motion,

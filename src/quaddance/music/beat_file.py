@@ -12,7 +12,8 @@ Two formats:
   of seconds, and optionally ``downbeats_s``.
 
 `read_beats` checks everything that needs no song and names the file and the problem in one
-line (`quaddance.errors.InputFileError`); `BeatList.check_within` checks the song's length.
+line (`quaddance.errors.InputFileError`); `BeatList.check_within` checks the song's length, and
+`BeatList.notes` says where the beats and the song may not go together (the dance is made).
 The dance composer (`quaddance.pipeline.compose`) puts the beats in the choreographer's grid.
 """
 
@@ -30,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from quaddance.errors import InputFileError, not_a_file
+from quaddance.layout import DANCE_TEMPO_BPM
 from quaddance.music.analysis import MIN_BEAT_GAP_S
 
 #: Fewest beats a file must give: one bar, the least the choreographer can dance to.
@@ -38,6 +40,9 @@ MIN_BEATS = 4
 DOWNBEAT_ON_BEAT_S = 0.01
 #: Most beats in a bar that a text file's second column may count (12/8 counted in eighths).
 MAX_BAR_BEATS = 12
+#: Longest stretch of the song before the first beat or after the last that passes without a
+#: note, s: the robot stands still there (an intro or an ending of a few bars is common).
+UNBEATEN_NOTE_S = 15.0
 
 _SEPARATOR = re.compile(r"[\s,]+")
 #: A file whose lines are all "digits,digits" (and no valid bar count) was written with decimal
@@ -72,6 +77,33 @@ class BeatList:
                 self.path,
                 f"beat {self.beats_s[-1]:.3f} s is past the song's end ({duration_s:.3f} s)",
             )
+
+    def notes(self, duration_s: float) -> list[str]:
+        """What a user may want to know before the robot dances to these beats on a song of
+        ``duration_s``: a long stretch with no beat (the robot stands still), or a tempo
+        outside the dance range (the beats are danced as they are, not halved or doubled)."""
+        beats = np.asarray(self.beats_s)
+        notes = []
+        bpm = 60.0 / float(np.median(np.diff(beats)))
+        lo, hi = DANCE_TEMPO_BPM
+        if not lo <= bpm <= hi:
+            other = "every second beat" if bpm > hi else "a beat between each two"
+            notes.append(
+                f"{self.name}: its beats run at {bpm:.0f} BPM, outside the dance range "
+                f"{lo:.0f}-{hi:.0f} BPM; they are danced as they are (give {other} to "
+                "dance inside it)"
+            )
+        if beats[0] > UNBEATEN_NOTE_S:
+            notes.append(
+                f"{self.name}: the first beat is at {beats[0]:.1f} s; the robot stands still "
+                "until then"
+            )
+        if duration_s - beats[-1] > UNBEATEN_NOTE_S:
+            notes.append(
+                f"{self.name}: the last beat is at {beats[-1]:.1f} s of the {duration_s:.1f} s "
+                f"song; the robot stands still for the last {duration_s - beats[-1]:.1f} s"
+            )
+        return notes
 
 
 def read_beats(path: Path) -> BeatList:

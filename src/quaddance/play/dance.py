@@ -333,6 +333,8 @@ def _run_dance(
     metrics.update(beat_metrics or body_and_coverage(**arrays))
     if dance.clamp_report is not None:
         metrics["clamped"] = dance.clamp_report
+    if dance.notes:
+        metrics["notes"] = list(dance.notes)
     timings["total_s"] = time.perf_counter() - t_start
     metrics["source"] = dance.source
     metrics["policy"] = str(policy_path)
