@@ -397,6 +397,17 @@ def test_a_moves_file_adds_moves_and_styles(tmp_path):
     )
 
 
+def test_a_built_in_style_re_weighted_in_a_file_keeps_what_the_file_does_not_name(tmp_path):
+    """[styles.calm] with paw moves only keeps calm's trunk; with body moves only, its paws."""
+    path = tmp_path / "moves.toml"
+    path.write_text("[styles.calm]\nrun = 2.0\n\n[styles.energetic]\nsway = 3.0\n")
+    moves = load_moves(path)
+    assert moves.body_style("calm") == BODY_STYLES["calm"]
+    assert moves.paw_styles()["calm"] == {"run": 2.0}
+    assert moves.body_style("energetic") == {"sway": 3.0}
+    assert moves.paw_styles()["energetic"] == STYLES["energetic"]
+
+
 @pytest.mark.parametrize(
     ("text", "message"),
     [

@@ -154,8 +154,14 @@ class MoveSet:
     path: Path | None = field(default=None, compare=False)  #: the --moves file, if any
 
     def body_style(self, style: str) -> dict[str, float]:
+        """The body-move weights of ``style``. A style of this set with a built-in name
+        replaces the built-in's body weights only where it names a body move, as
+        `paw_styles` does for paw moves: a style that re-weights the paws keeps its trunk."""
+        body_names = {m.name for m in self.body_moves}
         if style in self.styles:
-            return self.styles[style]
+            body = {k: v for k, v in self.styles[style].items() if k in body_names}
+            if body or style not in BODY_STYLES:
+                return body
         if style in BODY_STYLES:
             return BODY_STYLES[style]
         raise QuaddanceError(

@@ -11,7 +11,9 @@ Format (every key optional except a move's ``gestures``)::
       { column = "height_offset_m", amplitude = -0.02 },   # shape "dip", every beat
     ]
 
-    [styles.party]                 # a style: weights of body and paw move names
+    [styles.party]                 # a style: weights of body and paw move names (a
+                                   # built-in style's name changes its body weights if it
+                                   # names a body move, its paw weights if it names a paw one)
     shimmy_fast = 3.0
     bounce = 2.0
     run = 2.0                      # a paw move of quaddance.choreo.choreographer.MOVES
