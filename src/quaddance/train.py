@@ -180,11 +180,13 @@ def _transplant(old: dict, new: dict, old_cols: list[str], new_cols: list[str]) 
     pairs = [(j, where[name]) for j, name in enumerate(new_cols) if name in where]
     if not pairs:
         raise ValueError("no observation in common")
-    dst = torch.tensor([j for j, _ in pairs])
-    src = torch.tensor([i for _, i in pairs])
+    device = next(iter(new.values())).device
+    dst = torch.tensor([j for j, _ in pairs], device=device)
+    src = torch.tensor([i for _, i in pairs], device=device)
     for key, value in old.items():
         if key not in new:
             raise ValueError(f"{key} is not in this network")
+        value = value.to(new[key].device)  # read on the CPU; the new run may be on a GPU
         if key == "mlp.0.weight":
             w = torch.zeros_like(new[key])
             w[:, dst] = value[:, src]
