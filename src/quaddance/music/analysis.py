@@ -748,7 +748,7 @@ def at_analysis_level(y: np.ndarray) -> np.ndarray:
     peak = float(np.max(np.abs(y))) if y.size else 0.0
     if peak == 0.0 or abs(peak - ANALYSIS_PEAK) <= 1e-4 * ANALYSIS_PEAK:
         return y
-    return (y * np.float32(ANALYSIS_PEAK / peak)).astype(np.float32)
+    return y * np.float32(ANALYSIS_PEAK / peak)  # float32 times float32: no second copy
 
 
 def median_beat_period_s(beats_s: np.ndarray) -> float:
