@@ -1,4 +1,5 @@
-"""Score the offline analyser's mix of learned activations on songs outside the held-out parts.
+"""Score the offline analyser's mix of learned activations (and its beat tracker's stiffness) on
+songs outside the held-out parts.
 
 The analyser's onset envelopes take in two learned beat activations: its own
 (`AnalysisConfig.activation_weight`) and BeatNet's (`beatnet_weight`, the song heard at each of
@@ -42,24 +43,36 @@ SEVEN = (0.85, *FIVE, 1.15)
 NINE = (0.85, 0.9, 0.93, 0.96, 1.0, 1.04, 1.07, 1.1, 1.15)
 
 
+SHIPPED = analysis.AnalysisConfig()
+STEP_NAMES = {1: "whole", 2: "half", 4: "quarter"}
+
+
 @dataclass(frozen=True)
 class Mix:
     activation_weight: float
     beatnet_weight: float
     beatnet_stretches: tuple[float, ...] = (1.0,)
     gain_db: float = 0.0  # the song heard this much quieter: the analysis should not care
+    tightness: float = SHIPPED.tightness
+    beat_steps_per_frame: int = SHIPPED.beat_steps_per_frame
 
     @property
     def name(self) -> str:
         beatnet = tuning_grid.beatnet_name(self.beatnet_weight, self.beatnet_stretches)
         level = f", at {self.gain_db:g} dB" if self.gain_db else ""
-        return f"own {self.activation_weight:g}, {beatnet}{level}"
+        dp = (self.tightness, self.beat_steps_per_frame)
+        beats = "" if dp == (SHIPPED.tightness, SHIPPED.beat_steps_per_frame) else (
+            f", tightness {dp[0]:g} on {STEP_NAMES.get(dp[1], f'1/{dp[1]}')} frames"
+        )  # fmt: skip
+        return f"own {self.activation_weight:g}, {beatnet}{level}{beats}"
 
     def config(self) -> analysis.AnalysisConfig:
         return analysis.AnalysisConfig(
             activation_weight=self.activation_weight,
             beatnet_weight=self.beatnet_weight,
             beatnet_stretches=self.beatnet_stretches,
+            tightness=self.tightness,
+            beat_steps_per_frame=self.beat_steps_per_frame,
         )
 
 
@@ -78,10 +91,18 @@ MIXES = (
     Mix(0.25, 0.75, SEVEN),
     Mix(0.25, 0.75, NINE),
     Mix(0.25, 0.75, FIVE, gain_db=-6.0),
+    Mix(0.25, 0.75, FIVE, tightness=1000.0, beat_steps_per_frame=1),
+    Mix(0.25, 0.75, FIVE, tightness=3000.0, beat_steps_per_frame=1),
+    Mix(0.25, 0.75, FIVE, tightness=1000.0, beat_steps_per_frame=2),
+    Mix(0.25, 0.75, FIVE, tightness=6000.0, beat_steps_per_frame=2),
+    Mix(0.25, 0.75, FIVE, tightness=10000.0, beat_steps_per_frame=2),
+    Mix(0.25, 0.75, FIVE, tightness=3000.0, beat_steps_per_frame=4),
 )
 """The grid: the shares that shipped before, BeatNet alone, and the neighbours of the default
 (own 0.25, BeatNet 0.75 heard at five speeds) in each setting, its speeds among them; and the
-default with the song 6 dB quieter (what a file's level does to the analysis)."""
+default with the song 6 dB quieter (what a file's level does to the analysis); and the default
+mix with the beat tracker's dynamic program at other tightnesses and steps per frame (the
+shipped one is 3000 on half frames; 1000 on whole frames shipped before)."""
 
 
 def score(song: RealSong, y: np.ndarray, mix: Mix) -> dict[str, float]:

@@ -19,7 +19,9 @@ Ellis 2007) with the changes that matter for dance music:
    tempi (80-160 BPM), which settles the half/double-tempo choice where the music leaves it
    open: octave errors dominate beat-tracking errors (FACTS.md §4).
 3. The tempo may change: a local tempo curve (Viterbi over windowed autocorrelation near the
-   global tempo, with drift and jumps) guides the dynamic program.
+   global tempo, with drift and jumps) guides the dynamic program, which places beats on half
+   frames and holds their phase stiffly, as a dancer keeps the step through a passage of
+   louder off-beats.
 4. Off-beats: beats move by half a beat when the bass line changes pitch at their midpoints
    rather than at them (off-beat hats, skanking keys pull the tracker; harmony does not move).
    Then beats faster than the dance range (`DANCE_TEMPO_BPM`, 60-180 BPM) are halved and
@@ -107,12 +109,19 @@ class AnalysisConfig:
     offbeat_harmony_ratio: float = 2.0
     """Beats move by half a beat when the bass line changes pitch this many times more at the
     midpoints between them than at the beats (tuned)."""
-    tightness: float = 1000.0
+    tightness: float = 3000.0
     """Penalty on beat intervals off the local period, per squared log ratio, in standard
     deviations of the beat envelope (librosa's 100 is looser; our local tempo curve already
     follows tempo changes). High, so that the beats keep their phase through a passage whose
     off-beats are louder, as a dancer keeps the step: sliding half a beat over 8 beats costs
-    8 * 1000 * ln(17/16)^2 = 29 (tuned on songs outside the held-out parts)."""
+    8 * 3000 * ln(17/16)^2 = 88 (tuned with ``beat_steps_per_frame`` on songs outside the
+    held-out parts)."""
+    beat_steps_per_frame: int = 2
+    """The beat tracker's dynamic program places beats on this many steps per envelope frame
+    (the envelope interpolated between frames). On whole frames (23 ms) a beat interval can
+    only be 19 or 20 frames where the period is 19.4, so a high ``tightness`` charges every
+    beat for that rounding rather than for drifting off the phase; on half frames it can be
+    three times higher (tuned with ``tightness``). The beats are then rounded to frames."""
     section_kernel_bars: int = 4
     """Bars compared on each side of a candidate section boundary."""
     section_min_bars: int = 2
@@ -472,17 +481,30 @@ def _local_period(
 # --- beats ------------------------------------------------------------------------------------
 
 
-def _track_beats(onset: np.ndarray, period: np.ndarray, tightness: float) -> np.ndarray:
+def _track_beats(
+    onset: np.ndarray, period: np.ndarray, tightness: float, steps_per_frame: int = 1
+) -> np.ndarray:
     """Beat frames by dynamic programming (Ellis 2007) with a per-frame beat period.
 
     Args:
         onset: (n,) onset envelope.
         period: (n,) expected beat period at each frame, frames.
         tightness: weight of the squared log-ratio penalty on intervals off the period.
+        steps_per_frame: beats are placed on this many steps per frame, on ``onset`` and
+            ``period`` interpolated linearly (`AnalysisConfig.beat_steps_per_frame`).
 
     Returns:
         (n_beats,) increasing frame indices.
     """
+    if steps_per_frame > 1:
+        fine = np.arange(len(onset) * steps_per_frame) / steps_per_frame
+        frames = np.arange(len(onset))
+        steps = _track_beats(
+            np.interp(fine, frames, onset), np.interp(fine, frames, period) * steps_per_frame,
+            tightness,
+        )  # fmt: skip
+        # Beats are half a period (6 frames or more) apart: rounding keeps them increasing.
+        return np.minimum(np.round(steps / steps_per_frame).astype(int), len(onset) - 1)
     n = len(onset)
     o = onset / (onset.std() + 1e-9)
     score = o.copy()
@@ -706,7 +728,7 @@ def analyze(y: np.ndarray, sr: int, cfg: AnalysisConfig | None = None) -> Analys
     tempo_bpm = _global_tempo(feats.tempo_onset, fps, cfg)
     global_bpm = tempo_bpm
     period = _local_period(feats.tempo_onset, fps, tempo_bpm, cfg)
-    beat_frames = _track_beats(feats.beat_onset, period, cfg.tightness)
+    beat_frames = _track_beats(feats.beat_onset, period, cfg.tightness, cfg.beat_steps_per_frame)
     beat_frames = _trim_silence(beat_frames, feats.rms)
     # Fewer than 8 beats are too few to tell where the harmony changes.
     offbeat_shift = len(beat_frames) >= 8 and offbeat_harmony(feats.bass_chroma, beat_frames, cfg)
