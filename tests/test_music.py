@@ -539,7 +539,7 @@ def test_beats_keep_their_phase_through_a_passage_of_louder_off_beats(seed: int)
     # kicks drop to half and a snare twice as loud plays each off-beat, then the song goes on
     # as before. The beats stay on the kicks, as a dancer keeps the step
     # (`AnalysisConfig.tightness`, `beat_steps_per_frame`): with beats on whole frames and a
-    # tightness of 1000 they slid onto the snares and back (F 0.59-0.60).
+    # tightness of 1000 they slid onto the snares and back (F 0.59 for both seeds).
     rng = np.random.default_rng(seed)
     y = np.zeros(int(40.0 * SR), dtype=np.float32)
     t = np.arange(int(0.15 * SR)) / SR
