@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import re
 import shutil
@@ -30,6 +31,7 @@ from quaddance.errors import InputFileError, OutputFileError, QuaddanceError
 from quaddance.music.analysis import (
     Analysis,
     AnalysisConfig,
+    _track_beats,
     analyze,
     analyze_file,
     offbeat_harmony,
@@ -176,6 +178,29 @@ def test_tempo_octave_on_midi_songs(name: str, levels: tuple[float, ...], tmp_pa
     result = analyze(y, SR)
     assert min(abs(result.tempo_bpm / (k * tempo_bpm) - 1.0) for k in levels) < 0.03
     assert metrical_level_f_measure(beats_s, result.beats_s) >= 0.95
+
+
+@pytest.mark.parametrize(("from_bpm", "to_bpm"), [(80.0, 64.0), (64.0, 80.0), (100.0, 125.0)])
+def test_the_beat_dp_keeps_its_phase_across_an_abrupt_tempo_change(
+    from_bpm: float, to_bpm: float
+) -> None:
+    # Beats with off-beats nearly as strong, and a tempo that changes within half a second
+    # at 30 s. The interval across the change lies between the two periods; charging it
+    # against the later period alone dropped the beats around the change or moved the rest
+    # of the song onto the off-beats (F 0.96, 0.94, 0.44).
+    fps = SR / AnalysisConfig().hop_length
+    beats_s = [0.5]
+    while beats_s[-1] < 58.5:
+        beats_s.append(beats_s[-1] + 60.0 / (from_bpm if beats_s[-1] < 30.0 else to_bpm))
+    onset = np.zeros(round(60.0 * fps))
+    for b, nxt in itertools.pairwise(beats_s):
+        onset[round(b * fps)] += 1.0
+        onset[round((b + nxt) / 2 * fps)] += 0.9
+    period = np.interp(
+        np.arange(len(onset)) / fps, [29.75, 30.25], [60.0 / from_bpm, 60.0 / to_bpm]
+    )
+    frames = _track_beats(onset, period * fps, tightness=3000.0, steps_per_frame=2)
+    assert beat_f_measure(np.array(beats_s[:-1]), frames / fps) >= 0.98
 
 
 def test_keys_on_the_off_beats_do_not_pull_the_beats(tmp_path: Path) -> None:

@@ -110,7 +110,8 @@ class AnalysisConfig:
     """Beats move by half a beat when the bass line changes pitch this many times more at the
     midpoints between them than at the beats (tuned)."""
     tightness: float = 3000.0
-    """Penalty on beat intervals off the local period, per squared log ratio, in standard
+    """Penalty on beat intervals off the local period (outside the periods at the interval's
+    two beats, so that a sudden tempo change costs nothing), per squared log ratio, in standard
     deviations of the beat envelope (librosa's 100 is looser; our local tempo curve already
     follows tempo changes). High, so that the beats keep their phase through a passage whose
     off-beats are louder, as a dancer keeps the step: sliding half a beat over 8 beats costs
@@ -489,7 +490,8 @@ def _track_beats(
     Args:
         onset: (n,) onset envelope.
         period: (n,) expected beat period at each frame, frames.
-        tightness: weight of the squared log-ratio penalty on intervals off the period.
+        tightness: weight of the squared log-ratio penalty on an interval outside the range of
+            the periods at its two beats.
         steps_per_frame: beats are placed on this many steps per frame, on ``onset`` and
             ``period`` interpolated linearly (`AnalysisConfig.beat_steps_per_frame`).
 
@@ -516,7 +518,14 @@ def _track_beats(
             continue
         lo = max(lo, 0)
         prev = np.arange(lo, hi + 1)
-        cand = score[prev] - tightness * np.log((t - prev) / p) ** 2
+        # An interval is charged only for what lies outside the periods at its two beats:
+        # across an abrupt tempo change, charging it against the later period alone makes
+        # a stiff DP cheaper on the off-beats.
+        short = np.minimum(period[prev], p)
+        long = np.maximum(period[prev], p)
+        interval = (t - prev).astype(float)
+        off = np.log(np.clip(interval, short, long) / interval)
+        cand = score[prev] - tightness * off**2
         j = int(np.argmax(cand))
         if cand[j] > 0:
             score[t] = o[t] + cand[j]
