@@ -5,17 +5,19 @@ from __future__ import annotations
 import builtins
 import os
 import pickle
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from quaddance.choreo.bvh import find_ankles, load_bvh
+from quaddance.choreo.bvh import find_ankles, guess_unit, load_bvh
 from quaddance.choreo.motion import load_motion
 from quaddance.choreo.safe_pickle import safe_load_pickle
 from quaddance.choreo.smpl import LEFT_ANKLE, RIGHT_ANKLE, smpl_joints
 from quaddance.errors import InputFileError
+from quaddance.play.heldout import SKELETONS, write_bvh
 
 # SMPL joint indices used to pose the legs (SMPL order: 1/2 hips, 4/5 knees).
 L_HIP, R_HIP, L_KNEE, R_KNEE = 1, 2, 4, 5
@@ -447,6 +449,31 @@ def test_bvh_z_up_in_metres_is_detected(tmp_path):
     assert "m, z-up" in motion.source
     np.testing.assert_allclose(motion.feet_m[n_frames // 2 :, 1], 0.45, atol=1e-6)
     np.testing.assert_allclose(motion.feet_m[:, 0], 0.0, atol=1e-6)
+
+
+def test_cmu_skeleton_units_are_told_from_inches():
+    # The CMU database's BVH conversions keep its ASF unit (1/0.45 inch): the root-to-ankle
+    # chain of an adult subject is about 0 + 2.7 + 6.9 + 7.4 = 17 units (LHipJoint, LeftUpLeg,
+    # LeftLeg, LeftFoot offsets), which in inches would be a 0.43 m leg.
+    assert guess_unit(17.0)[0] == "cmu"
+    assert guess_unit(35.0)[0] == "inch"  # the same leg exported in inches
+    assert guess_unit(90.0)[0] == "cm"
+
+
+@pytest.mark.parametrize(("unit", "unit_m"), [("cmu", 0.0254 / 0.45), ("inch", 0.0254)])
+def test_bvh_lifts_come_out_in_metres_whatever_the_unit(tmp_path, unit, unit_m):
+    # A CMU-layout skeleton (its LHipJoint included) written in CMU units and in inches: the
+    # same lifts in metres either way.
+    feet_m = np.zeros((240, 2))
+    feet_m[40:80, 0] = 0.2
+    feet_m[140:180, 1] = 0.3
+    skel = replace(SKELETONS["cmu"], unit_m=unit_m)
+    path = write_bvh(tmp_path / f"{unit}.bvh", skel, feet_m, "curl", seed=3)
+    motion = load_motion(path)
+    assert f"BVH, {unit}," in motion.source
+    lift = motion.feet_m - motion.feet_m[:20].mean(axis=0)
+    np.testing.assert_allclose(lift[50:70, 0], 0.2, atol=0.01)
+    np.testing.assert_allclose(lift[150:170, 1], 0.3, atol=0.01)
 
 
 @pytest.mark.parametrize("order", ["ZXY", "XYZ", "YZX"])

@@ -22,7 +22,16 @@ from quaddance.errors import InputFileError
 _AXES = {"x": 0, "y": 1, "z": 2}
 
 # Candidate units, metres per file unit. BVH has no unit field; exporters use one of these.
-UNITS_M: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001, "inch": 0.0254}
+# "cmu": the CMU motion capture database's skeletons declare `:units length 0.45` (a file unit
+# is 1/0.45 inch, 5.6 cm), and the widely used BVH conversions of it keep that unit; its adult
+# leg chains are about 17 units long, which inches would read as a 0.43 m leg.
+UNITS_M: dict[str, float] = {
+    "m": 1.0,
+    "cm": 0.01,
+    "mm": 0.001,
+    "inch": 0.0254,
+    "cmu": 0.0254 / 0.45,
+}
 
 # Pelvis-to-ankle bone-chain length of an adult, metres (SMPL neutral body: 0.09 + 0.39 + 0.43,
 # FACTS.md section 3); the unit that brings the file's chain closest to this is chosen.
