@@ -13,7 +13,7 @@ does, so the bank builds on a training machine without librosa.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -105,6 +105,7 @@ def compose(
     motion: HumanMotion | None = None,
     music_name: str = "the music",
     whole_body: bool = True,
+    music_notes: Sequence[str] = (),
 ) -> Dance:
     """The dance of ``spec`` on ``grid``, or of a human ``motion``.
 
@@ -118,6 +119,8 @@ def compose(
         music_name: what the music is called in ``dance.source``.
         whole_body: False: paw targets only, for a paws-only policy; the trunk's dance is
             skipped (``body_targets`` zeros).
+        music_notes: what the user should hear about the music's beats (`Analysis.notes`);
+            dropped where ``spec.beats`` replace them.
 
     Returns:
         The `Dance` at ``spec.targets.out_fps``. Its ``body_targets`` are the trunk targets
@@ -128,7 +131,7 @@ def compose(
     """
     cfg = spec.targets
     four_feet = cfg.robot.body_four_feet
-    notes: tuple[str, ...] = ()
+    notes = tuple(music_notes)
     if spec.beats is not None:
         if grid is None:
             raise QuaddanceError(f"{spec.beats.path}: beats from a file need a song")
@@ -213,7 +216,9 @@ def make_dance(
         human = load_motion(motion)
     grid = MusicGrid.from_analysis(analysis) if analysis is not None else None
     music_name = Path(song).name if song is not None else "analysis"
-    return compose(spec or DanceSpec(), grid, human, music_name), analysis
+    # A stand-in analysis (tests, the online tracker's result) may have no notes.
+    notes = analysis.notes(music_name) if hasattr(analysis, "notes") else []
+    return compose(spec or DanceSpec(), grid, human, music_name, music_notes=notes), analysis
 
 
 def target_bank(

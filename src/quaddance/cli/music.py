@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from quaddance.cli.options import SongArg
+from quaddance.cli.options import SongArg, print_notes
 
 
 def analyze_cmd(
@@ -49,6 +49,8 @@ def analyze_cmd(
         result = track_file(song) if online else analyze_file(song)
     result.save_json(out)
     print(f"{song.name}: {result.summary()} -> {out}")
+    if not online:
+        print_notes(Console(stderr=True), result.notes(song.name))
     if click is not None:
         # The times as the JSON has them, so that the clicks are what `--beats OUT` dances to.
         written = result.to_json_dict()
