@@ -92,9 +92,10 @@ def summary(values: list[float]) -> dict[str, float]:
 
 
 def run(roots: dict[str, Path]) -> dict[str, Any]:
-    songs: dict[str, dict[str, float]] = {}
-    for set_name, root in roots.items():
-        for song in load_songs(root):
+    sets = {name: load_songs(root) for name, root in roots.items()}  # all checked before work
+    songs: dict[str, float] = {}
+    for set_name, set_songs in sets.items():
+        for song in set_songs:
             key = f"{song.split}/{set_name}/{song.name}"
             songs[key] = clarity(load_audio_at(song, SR_HZ))
             print(f"{key}: {songs[key]:.3f}")

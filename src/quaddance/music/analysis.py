@@ -622,8 +622,8 @@ def beat_clarity(
     envelope: np.ndarray, fps: float, tempo_range_bpm: tuple[float, float] = DANCE_TEMPO_BPM
 ) -> float:
     """How clearly ``envelope`` pulses at a tempo in ``tempo_range_bpm``: the highest
-    autocorrelation of its deviation from its mean, as a share of its variance, at a lag of one
-    beat in that range ("pulse clarity", Lartillot et al. 2008). 0 for a flat envelope.
+    normalised autocorrelation (`autocorrelation`) of its deviation from its mean at a lag of
+    one beat in that range ("pulse clarity", Lartillot et al. 2008); 0 for a flat envelope.
 
     Args:
         envelope: (n,) onset or beat envelope.
@@ -633,17 +633,11 @@ def beat_clarity(
     Returns:
         In [-1, 1]: about 0 for noise, 0.1 for speech, 0.4-0.9 for songs with a beat.
     """
-    x = np.asarray(envelope, dtype=float)
     lo_lag = max(1, int(np.ceil(60.0 * fps / tempo_range_bpm[1])))
     hi_lag = int(60.0 * fps / tempo_range_bpm[0])
-    if len(x) <= hi_lag:
+    if len(envelope) <= hi_lag:
         return 0.0
-    x = x - x.mean()
-    power = np.abs(np.fft.rfft(x, 2 * len(x))) ** 2
-    corr = np.fft.irfft(power)[: hi_lag + 1]  # zero-padded: the linear autocorrelation
-    if corr[0] <= 0.0:
-        return 0.0
-    return float(corr[lo_lag:].max() / corr[0])
+    return float(autocorrelation(np.asarray(envelope, dtype=float), hi_lag)[lo_lag:].max())
 
 
 def dance_level(beats_s: np.ndarray, strength: np.ndarray) -> np.ndarray:
