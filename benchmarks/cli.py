@@ -39,7 +39,8 @@ def bench_live_cmd(
         typer.Option(
             help="Sets, comma-separated: random, untuned, live, heldout (tuning too); real, "
             "real-tuning (benchmarks/real_music's parts), real-lmms, real-lmms-tuning (its "
-            "LMMS part, once built); the whole loop runs on the live-case sets among them "
+            "LMMS part, once built), real-fof-tuning (Frets on Fire's own songs, once built); "
+            "the whole loop runs on the live-case sets among them "
             "(live, heldout) and, with tuning, on 8 tuning songs."
         ),
     ] = "random,untuned,live,heldout",
@@ -173,7 +174,9 @@ def bench_beats_cmd(
             help="Comma-separated sets to score: tuning, random, untuned (MIDI songs written "
             "here), real (music made by people elsewhere, benchmarks/real_music: its results "
             "go to OUT with _real added to the name), real-lmms (LMMS's demo songs, "
-            "benchmarks/real_music_lmms, once built: results to OUT with _real_lmms added)."
+            "benchmarks/real_music_lmms, once built: results to OUT with _real_lmms added), "
+            "real-fof (Frets on Fire's own songs, benchmarks/real_music_fof, once built: "
+            "results to OUT with _real_fof added)."
         ),
     ] = "tuning,random,untuned",
     madmom_python: MadmomPython = None,
@@ -193,7 +196,10 @@ def bench_beats_cmd(
     tuning and held-out parts) offline, online (after the lock), with librosa and with
     BeatNet's published networks (CC BY 4.0) decoded by a bar-pointer HMM. "real-lmms" scores
     the same way the demo songs of LMMS, rendered by LMMS (build them first: apt-get install
-    lmms gcc; python -m benchmarks.real_music build --root benchmarks/real_music_lmms).
+    lmms gcc; python -m benchmarks.real_music build --root benchmarks/real_music_lmms), and
+    "real-fof" Frets on Fire's own band recordings, all tuning (python -m
+    benchmarks.real_music build --root benchmarks/real_music_fof; their licence keeps them off
+    the repository).
     """
     from rich.console import Console
     from rich.table import Table
@@ -213,7 +219,7 @@ def bench_beats_cmd(
             to = (
                 report
                 if report is None or name == "real" or "real" not in chosen
-                else (report.with_name(f"{report.stem}_lmms{report.suffix}"))
+                else report.with_name(f"{report.stem}{suffix.removeprefix('_real')}{report.suffix}")
             )
             _bench_real_beats(real_out, root, madmom_python, console, to)
     chosen = tuple(s for s in chosen if s not in REAL_SET_ROOTS)

@@ -58,14 +58,15 @@ REAL_SETS = {
     "real-tuning": ("real", "tuning"),
     "real-lmms": ("real-lmms", "heldout"),
     "real-lmms-tuning": ("real-lmms", "tuning"),
+    "real-fof-tuning": ("real-fof", "tuning"),
 }
 """The real-music sets: the set (``benchmarks.real_music.REAL_SET_ROOTS``) and the split each
 one is."""
 
 LIVE_SETS = (*BEAT_SETS, *LIVE_CASE_SETS, *REAL_SETS)
 """``tuning``, ``random``, ``untuned`` (``benchmarks/beats.py``), ``live`` (``live_songs``),
-``heldout`` (``heldout_songs``), ``real``, ``real-tuning``, ``real-lmms`` and
-``real-lmms-tuning`` (`real_songs`)."""
+``heldout`` (``heldout_songs``), ``real``, ``real-tuning``, ``real-lmms``,
+``real-lmms-tuning`` and ``real-fof-tuning`` (`real_songs`)."""
 
 DEFAULT_SETS = ("random", "untuned", "live", "heldout")
 """The sets reported by default: all but ``tuning``."""

