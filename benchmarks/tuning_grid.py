@@ -82,8 +82,8 @@ def main(
     sets.update({root.name: root for root in args.also})
     result = grid(sets, chosen)
     command = ["python", "-m", module]
-    for root in args.also:
-        command += ["--also", str(root)]
+    if args.also:  # one --also takes them all: a second would replace the first
+        command += ["--also", *map(str, args.also)]
     for name in args.mix or ():
         command += ["--mix", name]
     write_json(

@@ -100,10 +100,12 @@ def test_real_sets_are_the_real_music_splits(monkeypatch: pytest.MonkeyPatch) ->
 
     assert set(REAL_SETS) <= set(LIVE_SETS)
     assert {split for _, split in REAL_SETS.values()} == set(real_music.SPLITS)
-    assert {real_set for real_set, _ in REAL_SETS.values()} == set(real_music.REAL_SET_ROOTS)
-    assert set(real_music.REAL_SET_ROOTS.values()) == {
+    assert {real_set for real_set, _ in REAL_SETS.values()} == set(real_music.BENCH_SET_ROOTS)
+    assert set(real_music.BENCH_SET_ROOTS.values()) == {
         real_music.ROOT, real_music.LMMS_ROOT, real_music.FOF_ROOT
     }  # fmt: skip
+    # Fitting and tuning grids read only the sets with a held-out part: real-fof's licence.
+    assert set(real_music.REAL_SET_ROOTS.values()) == {real_music.ROOT, real_music.LMMS_ROOT}
     # The audio is not decoded here: only which songs each set holds, and their beats.
     monkeypatch.setattr(real_music, "load_audio_at", lambda song, sr: np.zeros(sr))
     songs = real_songs(("real", "random"), 11025)
@@ -131,8 +133,8 @@ def test_live_bench_real_lmms_sets_read_the_lmms_part(
         return []
 
     monkeypatch.setattr(real_music, "load_songs", songs_of)
-    monkeypatch.setitem(real_music.REAL_SET_ROOTS, "real", tmp_path / "real_music")
-    monkeypatch.setitem(real_music.REAL_SET_ROOTS, "real-lmms", tmp_path / "real_music_lmms")
+    monkeypatch.setitem(real_music.BENCH_SET_ROOTS, "real", tmp_path / "real_music")
+    monkeypatch.setitem(real_music.BENCH_SET_ROOTS, "real-lmms", tmp_path / "real_music_lmms")
     # Not built: one error that says what is missing, not a traceback.
     with pytest.raises(QuaddanceError, match="no real-music manifest"):
         real_songs(("real-lmms",), 11025)
@@ -203,7 +205,7 @@ def test_bench_beats_real_lmms_scores_the_lmms_set_once_built(
     lmms = tmp_path / "real_music_lmms"
     lmms.mkdir()
     monkeypatch.setattr(real_music, "LMMS_ROOT", lmms)
-    monkeypatch.setitem(real_music.REAL_SET_ROOTS, "real-lmms", lmms)
+    monkeypatch.setitem(real_music.BENCH_SET_ROOTS, "real-lmms", lmms)
     args = ["beats", "--sets", "real-lmms", "--out", str(tmp_path / "b.json"), "--no-madmom"]
     # Not built: one error that says how to build it.
     result = CliRunner().invoke(app, args)
@@ -224,7 +226,7 @@ def test_bench_beats_real_lmms_scores_the_lmms_set_once_built(
     fof = tmp_path / "real_music_fof"
     fof.mkdir()
     (fof / real_music.MANIFEST_NAME).write_text("{}")
-    monkeypatch.setitem(real_music.REAL_SET_ROOTS, "real-fof", fof)
+    monkeypatch.setitem(real_music.BENCH_SET_ROOTS, "real-fof", fof)
     three = [*args[:2], "real,real-fof", *args[3:], "--report", str(tmp_path / "r3.md")]
     result = CliRunner().invoke(app, three)
     assert result.exit_code == 0, result.output

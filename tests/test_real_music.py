@@ -319,7 +319,7 @@ def test_real_bench_names_its_set_and_command(monkeypatch, tmp_path: Path) -> No
     assert results["means"]["heldout"]["f_offline"] == 0.5
     assert results["means"]["heldout_lmms_render"]["n_songs"] == 1
     assert json.loads((tmp_path / "r.json").read_text())["means"] == results["means"]
-    monkeypatch.setitem(real_music.REAL_SET_ROOTS, "real-lmms", root)
+    monkeypatch.setitem(real_music.BENCH_SET_ROOTS, "real-lmms", root)
     results = real_music.run_real_bench(tmp_path / "r.json", root)
     assert results["command"] == "quaddance bench beats --sets real-lmms"
 
@@ -479,7 +479,7 @@ def test_download_takes_wheels_from_pypi_pinned_and_any_python(monkeypatch, tmp_
     assert found["songs==2.0"].name == "songs-2.0-py3-none-any.whl"
     (cmd,) = calls
     assert cmd[1:4] == ["-m", "pip", "download"] and cmd[-1] == "songs==2.0"
-    assert "--no-deps" in cmd and "--only-binary=:all:" in cmd and "--python-version" in cmd
+    assert "--no-deps" in cmd and "--only-binary=:all:" in cmd and "--ignore-requires-python" in cmd
 
 
 def test_sources_with_an_unknown_registry_are_one_line(tmp_path: Path) -> None:
