@@ -260,18 +260,20 @@ def test_the_real_music_report_gives_each_tracker_per_part(tmp_path: Path) -> No
     assert "x86_64, 2 CPU cores" in text and "CC BY-NC-SA" in text
 
 
+def _part_mean(n: int) -> dict:
+    """A report part of ``n`` songs with no tracker scores."""
+    return {"n_songs": n, "minutes": 1.0, "n_locked": 0, "locked_within_6s": 0,
+            "lock_s_median": None}  # fmt: skip
+
+
 def test_the_real_music_report_shows_a_kind_only_where_a_part_has_several() -> None:
     from benchmarks.real_music import report_md
 
-    def mean(n: int) -> dict:
-        return {"n_songs": n, "minutes": 1.0, "n_locked": 0, "locked_within_6s": 0,
-                "lock_s_median": None}  # fmt: skip
-
     results = {
         "command": "c", "set": "S", "metric": "M", "sources": "benchmarks/x/sources.toml",
-        "means": {"heldout": mean(3), "heldout_recording": mean(1),
-                  "heldout_lmms_render": mean(2), "heldout_midi_render": mean(0),
-                  "tuning": mean(2), "tuning_lmms_render": mean(2)},
+        "means": {"heldout": _part_mean(3), "heldout_recording": _part_mean(1),
+                  "heldout_lmms_render": _part_mean(2), "heldout_midi_render": _part_mean(0),
+                  "tuning": _part_mean(2), "tuning_lmms_render": _part_mean(2)},
         "songs": [],
     }  # fmt: skip
     text = report_md(results)
@@ -289,14 +291,10 @@ def test_the_real_music_report_shows_a_kind_only_where_a_part_has_several() -> N
 def test_the_real_music_report_of_a_set_with_no_held_out_part_says_so() -> None:
     from benchmarks.real_music import report_md
 
-    def mean(n: int) -> dict:
-        return {"n_songs": n, "minutes": 1.0, "n_locked": 0, "locked_within_6s": 0,
-                "lock_s_median": None}  # fmt: skip
-
     results = {
         "command": "c", "set": "S", "metric": "M", "sources": "benchmarks/y/sources.toml",
-        "means": {"heldout": mean(0), "heldout_recording": mean(0), "tuning": mean(3),
-                  "tuning_recording": mean(3)},
+        "means": {"heldout": _part_mean(0), "heldout_recording": _part_mean(0),
+                  "tuning": _part_mean(3), "tuning_recording": _part_mean(3)},
         "songs": [],
     }  # fmt: skip
     text = report_md(results)

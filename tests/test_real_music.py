@@ -364,6 +364,21 @@ def test_a_set_not_built_is_one_line_and_exit_2_from_the_scripts(
         load_manifest(Path("lmms"))
 
 
+def _two_song_sources(root: Path, package_lines: str, here: str, gone: str) -> Path:
+    """A set folder whose sources.toml lists songs "here" and "gone" at those paths."""
+    root.mkdir()
+    song = (
+        '[[song]]\nname = "{name}"\n' + package_lines + '\npath = "{path}"\ntitle = "t"\n'
+        'artist = "a"\nlicence = "GPL-2.0"\nsplit = "tuning"\nnotes = ""\n'
+    )
+    (root / "sources.toml").write_text(
+        'description = "d"\nsplit_reason = "r"\n'
+        + song.format(name="here", path=here)
+        + song.format(name="gone", path=gone)
+    )
+    return root
+
+
 def test_build_names_a_source_missing_from_its_package_before_rendering(tmp_path: Path) -> None:
     import shutil
     import subprocess
@@ -382,17 +397,10 @@ def test_build_names_a_source_missing_from_its_package_before_rendering(tmp_path
     (pkg / "usr/share/songs/there.mid").write_bytes(b"MThd")
     deb = tmp_path / "tiny-songs_1.0_all.deb"
     subprocess.run(["dpkg-deb", "--build", str(pkg), str(deb)], check=True, capture_output=True)
-    root = tmp_path / "set"
-    root.mkdir()
-    song = (
-        '[[song]]\nname = "{name}"\npackage = "tiny-songs"\npath = "{path}"\ntitle = "t"\n'
-        'artist = "a"\nlicence = "GPL-2.0"\nsplit = "tuning"\nnotes = ""\n'
-    )
-    (root / "sources.toml").write_text(
-        'description = "d"\nsplit_reason = "r"\n'
-        + song.format(name="here", path="usr/share/songs/there.mid")
-        + song.format(name="gone", path="usr/share/doom/freedoom1.wad:D_E1M1")
-    )
+    root = _two_song_sources(
+        tmp_path / "set", 'package = "tiny-songs"',
+        here="usr/share/songs/there.mid", gone="usr/share/doom/freedoom1.wad:D_E1M1",
+    )  # fmt: skip
     with pytest.raises(real_music.SetFileMissingError) as err:
         real_music.build(root, debs={"tiny-songs": deb})
     msg = str(err.value)
@@ -434,18 +442,10 @@ def test_build_reads_a_wheel_and_names_a_source_missing_from_it(tmp_path: Path) 
     wheel = tmp_path / "tiny_songs-1.2-py3-none-any.whl"
     with zipfile.ZipFile(wheel, "w") as z:
         z.writestr("tiny_songs/data/songs/here/notes.mid", b"MThd")
-    root = tmp_path / "set"
-    root.mkdir()
-    song = (
-        '[[song]]\nname = "{name}"\npackage = "tiny-songs==1.2"\nregistry = "pypi"\n'
-        'path = "{path}"\ntitle = "t"\nartist = "a"\nlicence = "GPL-2.0"\nsplit = "tuning"\n'
-        'notes = ""\n'
-    )
-    (root / "sources.toml").write_text(
-        'description = "d"\nsplit_reason = "r"\n'
-        + song.format(name="here", path="tiny_songs/data/songs/here")
-        + song.format(name="gone", path="tiny_songs/data/songs/gone")
-    )
+    root = _two_song_sources(
+        tmp_path / "set", 'package = "tiny-songs==1.2"\nregistry = "pypi"',
+        here="tiny_songs/data/songs/here", gone="tiny_songs/data/songs/gone",
+    )  # fmt: skip
     with pytest.raises(real_music.SetFileMissingError) as err:
         real_music.build(root, debs={"tiny-songs==1.2": wheel})
     msg = str(err.value)
