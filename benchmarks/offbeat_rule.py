@@ -97,15 +97,24 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--out", type=Path, default=Path(RESULTS), help="where to write JSON")
     args = parser.parse_args(argv)
     result = run({**REAL_SET_ROOTS, **{root.name: root for root in args.also}})
-    command = ["python", "-m", "benchmarks.offbeat_rule"]
-    if args.also:  # one --also takes them all: a second would replace the first
-        command += ["--also", *map(str, args.also)]
-    if args.out != Path(RESULTS):
-        command += ["--out", str(args.out)]
-    write_json(args.out, {"command": shlex.join(command), **result})
+    write_results("benchmarks.offbeat_rule", args.also, [], args.out, RESULTS, result)
+
+
+def write_results(
+    module: str, also: list[Path], flags: list[str], out: Path, default_out: str, result: dict
+) -> None:
+    """Write ``result`` as JSON (atomically) with the command that made it, and print its
+    summary per split: what the rule benchmarks share."""
+    command = ["python", "-m", module]
+    if also:  # one --also takes them all: a second would replace the first
+        command += ["--also", *map(str, also)]
+    command += flags
+    if out != Path(default_out):
+        command += ["--out", str(out)]
+    write_json(out, {"command": shlex.join(command), **result})
     for split, stats in result["summary"].items():
         print(f"{split}: {stats}")
-    print(f"wrote {args.out}")
+    print(f"wrote {out}")
 
 
 if __name__ == "__main__":
