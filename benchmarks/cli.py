@@ -183,7 +183,11 @@ def bench_beats_cmd(
     no_madmom: NoMadmom = False,
     report: Annotated[
         Path | None,
-        typer.Option(help="With the real set: also write its markdown report here."),
+        typer.Option(
+            help="With a real-music set: also write its markdown report here (several: the "
+            "first of real, real-lmms, real-fof here, each other's beside it as NAME_lmms.md, "
+            "NAME_fof.md)."
+        ),
     ] = None,
 ) -> None:
     """Beat F-measure of our analyser, librosa's default (and madmom's) on songs with exact beats.
@@ -211,17 +215,17 @@ def bench_beats_cmd(
     chosen = tuple(s.strip() for s in sets.split(",") if s.strip())
     from benchmarks.real_music import BENCH_SET_ROOTS
 
-    for name, root in BENCH_SET_ROOTS.items():
-        if name in chosen:
-            suffix = "_" + name.replace("-", "_")  # beats_real.json, beats_real_lmms.json
-            real_out = out.with_name(f"{out.stem}{suffix}{out.suffix}")
-            # One report per set: the second set's goes beside the first's.
-            to = (
-                report
-                if report is None or name == "real" or "real" not in chosen
-                else report.with_name(f"{report.stem}{suffix.removeprefix('_real')}{report.suffix}")
-            )
-            _bench_real_beats(real_out, root, madmom_python, console, to)
+    real_sets = [name for name in BENCH_SET_ROOTS if name in chosen]
+    for k, name in enumerate(real_sets):
+        suffix = "_" + name.replace("-", "_")  # beats_real.json, beats_real_lmms.json
+        real_out = out.with_name(f"{out.stem}{suffix}{out.suffix}")
+        # One report per set: the first set's at REPORT, each other's beside it (r_lmms.md).
+        to = (
+            report
+            if report is None or k == 0
+            else report.with_name(f"{report.stem}{suffix.removeprefix('_real')}{report.suffix}")
+        )
+        _bench_real_beats(real_out, BENCH_SET_ROOTS[name], madmom_python, console, to)
     chosen = tuple(s for s in chosen if s not in BENCH_SET_ROOTS)
     if not chosen:
         return

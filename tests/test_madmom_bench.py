@@ -232,6 +232,11 @@ def test_bench_beats_real_lmms_scores_the_lmms_set_once_built(
     assert result.exit_code == 0, result.output
     assert scored[-1] == (tmp_path / "b_real_fof.json", fof)
     assert (tmp_path / "r3.md").is_file() and (tmp_path / "r3_fof.md").is_file()
+    # Without the first set, the first one chosen takes the name given; none overwrites another.
+    two = [*args[:2], "real-lmms,real-fof", *args[3:], "--report", str(tmp_path / "r2.md")]
+    result = CliRunner().invoke(app, two)
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "r2.md").is_file() and (tmp_path / "r2_fof.md").is_file()
 
 
 def test_the_real_music_report_gives_each_tracker_per_part(tmp_path: Path) -> None:
