@@ -116,7 +116,7 @@ def score(song: RealSong, y: np.ndarray, mix: Mix) -> dict[str, float]:
 
 
 @contextlib.contextmanager
-def _beatnet_once_per_speed(y: np.ndarray) -> Iterator[None]:
+def beatnet_once_per_speed(y: np.ndarray) -> Iterator[None]:
     """While the mixes score song ``y``, the network hears it once at each speed: the
     analyser's calls of `beatnet.beat_activation` on it are answered from a cache (the mixes
     share their speeds; this makes the grid about five times quicker)."""
@@ -140,7 +140,7 @@ def score_song(song: RealSong, mixes: tuple[Mix, ...]) -> dict[str, dict[str, fl
     """Each mix's scores on ``song``."""
     # float32, as the analyser reads it: the same array reaches the network
     y = np.asarray(load_audio_at(song, SR_HZ), dtype=np.float32)
-    with _beatnet_once_per_speed(y):
+    with beatnet_once_per_speed(y):
         return {mix.name: score(song, y, mix) for mix in mixes}
 
 

@@ -15,13 +15,12 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import shlex
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from benchmarks.analyser_mix import _beatnet_once_per_speed
+from benchmarks.analyser_mix import beatnet_once_per_speed
 from benchmarks.beats import metrical_level_f_measure
 from benchmarks.real_music import (
     REAL_SET_ROOTS,
@@ -31,8 +30,9 @@ from benchmarks.real_music import (
     load_audio_at,
     load_songs,
     run_as_script,
+    script_command,
+    write_set_results,
 )
-from quaddance.fileio import write_json
 from quaddance.music import analysis
 
 RESULTS = "benchmarks/results/offbeat_rule.json"
@@ -51,7 +51,7 @@ def score_song(song: RealSong) -> dict[str, Any]:
     """The shipped analyser's scores on ``song``, whether the test fired, and where it did,
     the scores with the test off."""
     y = np.asarray(load_audio_at(song, SR_HZ), dtype=np.float32)
-    with _beatnet_once_per_speed(y):
+    with beatnet_once_per_speed(y):
         shipped = analysis.analyze(y, SR_HZ)
         fired = bool(shipped.extra["offbeat_shift"])
         without = analysis.analyze(y, SR_HZ, RULE_OFF) if fired else shipped
@@ -97,24 +97,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--out", type=Path, default=Path(RESULTS), help="where to write JSON")
     args = parser.parse_args(argv)
     result = run({**REAL_SET_ROOTS, **{root.name: root for root in args.also}})
-    write_results("benchmarks.offbeat_rule", args.also, [], args.out, RESULTS, result)
-
-
-def write_results(
-    module: str, also: list[Path], flags: list[str], out: Path, default_out: str, result: dict
-) -> None:
-    """Write ``result`` as JSON (atomically) with the command that made it, and print its
-    summary per split: what the rule benchmarks share."""
-    command = ["python", "-m", module]
-    if also:  # one --also takes them all: a second would replace the first
-        command += ["--also", *map(str, also)]
-    command += flags
-    if out != Path(default_out):
-        command += ["--out", str(out)]
-    write_json(out, {"command": shlex.join(command), **result})
-    for split, stats in result["summary"].items():
-        print(f"{split}: {stats}")
-    print(f"wrote {out}")
+    command = script_command("benchmarks.offbeat_rule", args.also, [], args.out, RESULTS)
+    write_set_results(command, args.out, result)
 
 
 if __name__ == "__main__":

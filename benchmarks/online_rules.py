@@ -3,10 +3,10 @@
 The online tracker (`music.online_beats`) keeps rules beyond its tempo filter and beat score:
 the three-four test, the backbeat test, the swing test, the metrical-level hold and the fast
 tempo re-estimate after a change. This tracks every song of the real-music sets (tuning and
-held-out parts) and of each ``--also`` set as ``bench beats --sets real`` does (`track_file`),
-with the tracker as it ships and with each rule switched off in turn, and reports its F at the
-metrical level after its lock, and its lock time. It measures rules that stay; nothing is
-tuned by it.
+held-out parts) and of each ``--also`` set as ``bench beats --sets real`` does (decoded and
+tracked as `track_file` does), with the tracker as it ships and with each rule switched off in
+turn, and reports its F at the metrical level after its lock, and its lock time. It measures
+rules that stay; nothing is tuned by it.
 
     python -m benchmarks.online_rules [--also ROOT ...] [--rule NAME ...] [--jobs N] [--out FILE]
 """
@@ -22,10 +22,18 @@ from typing import Any
 import numpy as np
 
 from benchmarks.beats import metrical_level_f_measure
-from benchmarks.offbeat_rule import write_results
-from benchmarks.real_music import REAL_SET_ROOTS, SPLITS, RealSong, load_songs, run_as_script
+from benchmarks.real_music import (
+    REAL_SET_ROOTS,
+    SPLITS,
+    RealSong,
+    load_songs,
+    run_as_script,
+    script_command,
+    write_set_results,
+)
 from quaddance.music import online_beats
-from quaddance.music.live import track_file
+from quaddance.music.live import FileSource, track_samples
+from quaddance.music.online_beats import SR_HZ
 
 RESULTS = "benchmarks/results/online_rules.json"
 
@@ -56,10 +64,16 @@ def rule_off(name: str) -> Iterator[None]:
             setattr(online_beats, constant, value)
 
 
-def score(song: RealSong) -> dict[str, float | None]:
+def decode(song: RealSong) -> np.ndarray:
+    """The song's audio as ``bench beats --sets real`` hands it to the tracker (`track_file`
+    decodes it so), once for all the ways it is tracked."""
+    return FileSource(song.audio_path, realtime=False).y
+
+
+def score(song: RealSong, y: np.ndarray) -> dict[str, float | None]:
     """The online tracker's F at the metrical level after its lock (0 without one) and its lock
-    time, as ``bench beats --sets real`` scores it."""
-    track = track_file(song.audio_path)
+    time on ``y`` (`decode`), as ``bench beats --sets real`` scores it."""
+    track = track_samples(y, SR_HZ)
     lock_s = track.first_lock_s()
     if lock_s is None:
         return {"f_metrical": 0.0, "lock_s": None}
@@ -87,10 +101,11 @@ def summary(rows: list[dict[str, Any]], rules: list[str]) -> dict[str, Any]:
 
 def score_ways(song: RealSong, rules: list[str]) -> dict[str, dict[str, float | None]]:
     """`score` of ``song`` as shipped and with each of ``rules`` off."""
+    y = decode(song)
     row = {}
     for rule in [SHIPPED, *rules]:
         with rule_off(rule):
-            row[rule] = score(song)
+            row[rule] = score(song, y)
     print(song.name, {r: v["f_metrical"] for r, v in row.items()}, flush=True)
     return row
 
@@ -136,7 +151,8 @@ def main(argv: list[str] | None = None) -> None:
     flags = [f for rule in args.rule or () for f in ("--rule", rule)]
     if args.jobs != 1:  # the same results, sooner
         flags += ["--jobs", str(args.jobs)]
-    write_results("benchmarks.online_rules", args.also, flags, args.out, RESULTS, result)
+    command = script_command("benchmarks.online_rules", args.also, flags, args.out, RESULTS)
+    write_set_results(command, args.out, result)
 
 
 if __name__ == "__main__":

@@ -52,7 +52,7 @@ import re
 import subprocess
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -167,6 +167,35 @@ class SourcesFileError(QuaddanceError, ValueError):
 class SetFileMissingError(QuaddanceError, FileNotFoundError):
     """A file of a real-music set is missing (the set not built, or a listed file gone): a
     one-line error for the benchmark commands, still a FileNotFoundError for callers."""
+
+
+def script_command(
+    module: str, also: Sequence[Path], flags: Sequence[str] = (), out: Path | None = None,
+    default_out: str = "",
+) -> str:  # fmt: skip
+    """The command line of a script over the real-music sets, for its results file: the
+    ``--also`` sets after one flag (argparse reads a second ``--also`` as replacing the first),
+    then ``flags``, then ``--out`` unless it is ``default_out`` (or not given)."""
+    import shlex
+
+    command = ["python", "-m", module]
+    if also:
+        command += ["--also", *map(str, also)]
+    command += flags
+    if out is not None and out != Path(default_out):
+        command += ["--out", str(out)]
+    return shlex.join(command)
+
+
+def write_set_results(command: str, out: Path, result: dict[str, Any]) -> None:
+    """Write ``result`` as JSON (atomically) with the ``command`` that made it, and print its
+    summary per split: what the rule benchmarks share."""
+    from quaddance.fileio import write_json
+
+    write_json(out, {"command": command, **result})
+    for split, stats in result["summary"].items():
+        print(f"{split}: {stats}")
+    print(f"wrote {out}")
 
 
 def run_as_script(main: Callable[[], None]) -> None:

@@ -6,12 +6,11 @@ tracker) share."""
 from __future__ import annotations
 
 import argparse
-import shlex
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from benchmarks.real_music import RealSong
+from benchmarks.real_music import RealSong, script_command
 from quaddance.fileio import write_json
 
 Row = dict[str, Any]
@@ -81,16 +80,12 @@ def main(
     sets = {"tuning": roots["real"], "tuning-lmms": roots["real-lmms"]}
     sets.update({root.name: root for root in args.also})
     result = grid(sets, chosen)
-    command = ["python", "-m", module]
-    if args.also:  # one --also takes them all: a second would replace the first
-        command += ["--also", *map(str, args.also)]
-    for name in args.mix or ():
-        command += ["--mix", name]
+    command = script_command(module, args.also, [f for n in args.mix or () for f in ("--mix", n)])
     write_json(
         args.out,
         {
             "benchmark": module.rsplit(".", 1)[-1],
-            "command": shlex.join(command),
+            "command": command,
             "metric": metric,
             **result,
         },
