@@ -80,3 +80,22 @@ def test_every_split_is_summarised_per_rule(tmp_path: Path, monkeypatch) -> None
                                      "songs_up": 0, "songs_down": 2}  # fmt: skip
     assert result["summary"]["tuning"]["backbeat test"]["songs_down"] == 0
     assert set(result["rules_off"]) == {"backbeat test", "swing test"}
+
+
+def test_jobs_track_the_songs_in_processes_with_the_same_results(tmp_path, monkeypatch) -> None:
+    made = code_made_sets(tmp_path, 10.0)
+    a, _ = made.sets
+
+    def score(song, y):
+        # Depends on the song and on which rule is off in the process that scores it.
+        return {"f_metrical": float(len(y) % 7) + online_beats.FAST_MISSES % 5, "lock_s": 1.0}
+
+    monkeypatch.setattr(rules, "score", score)
+    monkeypatch.setattr(rules, "decode", lambda song: made.audio[song.name][: 100 + len(song.name)])
+    monkeypatch.setattr(rules, "load_songs", made.load_songs)
+    one = rules.run({"real": a}, ["fast tempo re-estimate"], jobs=1)
+    two = rules.run({"real": a}, ["fast tempo re-estimate"], jobs=2)
+    assert one == two and len(one["songs"]) == 2
+    for row in two["songs"].values():  # the rule was off in the worker for its own way only
+        shipped, off = row["as shipped"]["f_metrical"], row["fast tempo re-estimate"]["f_metrical"]
+        assert shipped - off == online_beats.FAST_MISSES % 5
