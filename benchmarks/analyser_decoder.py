@@ -36,6 +36,7 @@ from benchmarks.real_music import (
     load_audio_at,
     load_songs,
     run_as_script,
+    score_sets,
     script_command,
     write_set_results,
 )
@@ -124,18 +125,8 @@ def summary(rows: list[dict[str, dict[str, float]]]) -> dict[str, Any]:
 def run(roots: dict[str, Path], jobs: int = 1) -> dict[str, Any]:
     """Every song of ``roots`` (set name -> root), each split, in ``jobs`` processes; summaries
     per split."""
-    from concurrent.futures import ProcessPoolExecutor
-
-    # Every set is read first, so that a set not built stops the run before any analysis.
     by_set = {name: load_songs(root, SPLITS) for name, root in roots.items()}
-    keyed = [(f"{s.split}/{name}/{s.name}", s) for name, ss in by_set.items() for s in ss]
-    if jobs > 1:
-        with ProcessPoolExecutor(jobs) as pool:
-            rows = list(pool.map(score_song, [s for _, s in keyed]))
-    else:
-        rows = [score_song(s) for _, s in keyed]
-    songs = {key: row for (key, _), row in zip(keyed, rows, strict=True)}
-    splits = {s: [r for k, r in songs.items() if k.startswith(f"{s}/")] for s in SPLITS}
+    songs, splits = score_sets(by_set, score_song, jobs)
     return {
         "benchmark": "analyser_decoder",
         "metric": "the offline analyser's beat F (+-70 ms) at its metrical level and strict, and "

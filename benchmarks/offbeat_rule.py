@@ -30,6 +30,7 @@ from benchmarks.real_music import (
     load_audio_at,
     load_songs,
     run_as_script,
+    score_sets,
     script_command,
     write_set_results,
 )
@@ -55,7 +56,9 @@ def score_song(song: RealSong) -> dict[str, Any]:
         shipped = analysis.analyze(y, SR_HZ)
         fired = bool(shipped.extra["offbeat_shift"])
         without = analysis.analyze(y, SR_HZ, RULE_OFF) if fired else shipped
-    return {"fired": fired, "with": _scores(song, shipped), "without": _scores(song, without)}
+    row = {"fired": fired, "with": _scores(song, shipped), "without": _scores(song, without)}
+    print(song.name, row, flush=True)
+    return row
 
 
 def summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
@@ -70,15 +73,8 @@ def summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
 
 def run(roots: dict[str, Path]) -> dict[str, Any]:
     """Every song of ``roots`` (set name -> root), each split; summaries per split."""
-    # Every set is read first, so that a set not built stops the run before any analysis.
     by_set = {name: load_songs(root, SPLITS) for name, root in roots.items()}
-    songs: dict[str, dict[str, Any]] = {}
-    for name, set_songs in by_set.items():
-        for song in set_songs:
-            key = f"{song.split}/{name}/{song.name}"
-            songs[key] = score_song(song)
-            print(key, songs[key], flush=True)
-    splits = {s: [r for k, r in songs.items() if k.startswith(f"{s}/")] for s in SPLITS}
+    songs, splits = score_sets(by_set, score_song)
     return {
         "benchmark": "offbeat_rule",
         "metric": "the offline analyser's beat F (+-70 ms) at its metrical level and downbeat F, "

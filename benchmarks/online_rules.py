@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -28,6 +29,7 @@ from benchmarks.real_music import (
     RealSong,
     load_songs,
     run_as_script,
+    score_sets,
     script_command,
     write_set_results,
 )
@@ -113,18 +115,8 @@ def score_ways(song: RealSong, rules: list[str]) -> dict[str, dict[str, float | 
 def run(roots: dict[str, Path], rules: list[str], jobs: int = 1) -> dict[str, Any]:
     """Every song of ``roots`` (set name -> root), each split, each way, in ``jobs`` processes;
     summaries per split."""
-    from concurrent.futures import ProcessPoolExecutor
-
-    # Every set is read first, so that a set not built stops the run before any tracking.
     by_set = {name: load_songs(root, SPLITS) for name, root in roots.items()}
-    keyed = [(f"{s.split}/{name}/{s.name}", s) for name, ss in by_set.items() for s in ss]
-    if jobs > 1:  # each process switches the rules in its own copy of the module
-        with ProcessPoolExecutor(jobs) as pool:
-            rows = list(pool.map(score_ways, [s for _, s in keyed], [rules] * len(keyed)))
-    else:
-        rows = [score_ways(s, rules) for _, s in keyed]
-    songs = {key: row for (key, _), row in zip(keyed, rows, strict=True)}
-    splits = {s: [r for k, r in songs.items() if k.startswith(f"{s}/")] for s in SPLITS}
+    songs, splits = score_sets(by_set, functools.partial(score_ways, rules=rules), jobs)
     return {
         "benchmark": "online_rules",
         "metric": "the online tracker's beat F (+-70 ms) at its metrical level after its first "

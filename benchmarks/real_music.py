@@ -198,6 +198,26 @@ def write_set_results(command: str, out: Path, result: dict[str, Any]) -> None:
     print(f"wrote {out}")
 
 
+def score_sets(
+    by_set: dict[str, list[RealSong]], score: Callable[[RealSong], Any], jobs: int = 1
+) -> tuple[dict[str, Any], dict[str, list[Any]]]:
+    """``score`` of every song of ``by_set`` (set name -> its songs), in ``jobs`` processes
+    (``score`` must then be a module-level function or a partial of one): the rows keyed
+    ``split/set/song``, and the same rows per split (`SPLITS`). What the rule benchmarks share;
+    their sets are read before, so that a set not built stops them before any work."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    keyed = [(f"{s.split}/{name}/{s.name}", s) for name, songs in by_set.items() for s in songs]
+    if jobs > 1:  # each process has its own copy of the modules that a score switches
+        with ProcessPoolExecutor(jobs) as pool:
+            rows = list(pool.map(score, [s for _, s in keyed]))
+    else:
+        rows = [score(s) for _, s in keyed]
+    scored = {key: row for (key, _), row in zip(keyed, rows, strict=True)}
+    splits = {sp: [r for k, r in scored.items() if k.startswith(f"{sp}/")] for sp in SPLITS}
+    return scored, splits
+
+
 def run_as_script(main: Callable[[], None]) -> None:
     """Run a ``python -m benchmarks...`` entry point as ``quaddance`` runs a command: a
     `QuaddanceError` (a set not built, a bad file) is one line on stderr and exit status 2."""
