@@ -75,6 +75,8 @@ def test_paired_differences_and_their_interval() -> None:
     paired = bg.score([results("real", rows)])["paired"]["offline - madmom_dbn"]["f_metrical"]
     assert paired["mean_diff"] == pytest.approx(0.0, abs=1e-9)
     assert (paired["ours_higher"], paired["theirs_higher"], paired["ties"]) == (2, 2, 1)
+    # Ours raised to madmom's 0.7 on the songs it loses: differences 0, 0, 0, 0.1, 0.2.
+    assert paired["with_theirs_where_higher"] == pytest.approx(0.06)
     low, high = paired["interval_95"]
     assert -0.2 < low < 0.0 < high < 0.2
     # A difference that every song shares has no spread.
@@ -95,6 +97,8 @@ def test_the_command_writes_json_and_report(tmp_path: Path) -> None:
     text = report.read_text()
     assert "| offline F at its metrical level | 0.815 | >= madmom DBN + 0.03 = 0.930 | no |" in text
     assert "| offline - madmom_dbn | f_metrical | -0.085 |" in text
+    # Ours raised to madmom's 0.9 on b leads by the 0.03 of a alone, strict and at the level.
+    assert text.count("| 1 | 1 | 0 | +0.015 |") == 2
 
 
 def test_results_without_madmom_are_one_line_naming_the_file(tmp_path: Path) -> None:
