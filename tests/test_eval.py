@@ -221,7 +221,7 @@ def captured(monkeypatch):
     """Replace the dancing by a recorder: what the CLI asked for, fast."""
     calls: list[tuple[list[Path], EvalSettings]] = []
 
-    def fake_items(items, policy, settings=None, progress=None):
+    def fake_items(items, policy, settings=None, progress=None, motions=None):
         calls.append((list(items), settings))
         return [fake_row(p.name) for p in items]
 
@@ -320,3 +320,35 @@ def test_eval_held_out_over_a_file_is_one_line(tmp_path):
     result = CliRunner().invoke(app, ["eval", "--held-out", str(taken), "--set", "other"])
     assert isinstance(result.exception, OutputFileError), result.output
     assert str(result.exception).startswith(f"{taken}: exists and is a file")
+
+
+def test_eval_reads_each_motion_file_once(tmp_path, monkeypatch):
+    """The early check reads each motion file; the dance takes that reading, not a second one
+    (a large BVH was parsed twice)."""
+    from motion_fuzz_cases import valid_bvh
+
+    from quaddance.choreo import motion as motion_mod
+    from quaddance.play import dance as dance_mod
+
+    bvh = tmp_path / "steps.bvh"
+    bvh.write_text(valid_bvh(96, 1 / 24, np.random.default_rng(0)))
+    reads: list[Path] = []
+    real_load = motion_mod.load_motion
+
+    def counted(path, cfg=None):
+        reads.append(Path(path))
+        return real_load(path, cfg)
+
+    monkeypatch.setattr(motion_mod, "load_motion", counted)
+    humans: list[object] = []
+    real_run = dance_mod.run_dance
+
+    def run_dance(job, **kwargs):
+        humans.append(job.human)
+        return real_run(job, **kwargs)
+
+    monkeypatch.setattr(dance_mod, "run_dance", run_dance)
+    rows = evaluate([bvh], None, tmp_path / "report.md")
+    assert reads == [bvh]
+    assert len(humans) == 1 and isinstance(humans[0], motion_mod.HumanMotion)
+    assert [r["name"] for r in rows] == ["steps.bvh"] and rows[0]["duration_s"] > 3.0

@@ -189,6 +189,7 @@ def make_dance(
     motion: Path | None,
     spec: DanceSpec | None = None,
     analysis: Analysis | Any | None = None,
+    human: HumanMotion | None = None,
 ) -> tuple[Dance, Analysis | None]:
     """`compose` a dance from a song (built-in choreographer) or from a human motion file.
 
@@ -199,6 +200,8 @@ def make_dance(
             heights and trunk are danced instead of the choreographer's.
         spec: which dance; default `DanceSpec()`.
         analysis: a ready `quaddance.music.analysis.Analysis` of ``song``.
+        human: ``motion`` already read by `quaddance.choreo.motion.load_motion` (eval reads
+            each file before any work, to fail early): it is not read again.
 
     Returns:
         The `Dance` and the song's analysis (None without a song).
@@ -209,8 +212,7 @@ def make_dance(
         from quaddance.music.analysis import analyze_file
 
         analysis = analyze_file(song)
-    human = None
-    if motion is not None:
+    if human is None and motion is not None:
         from quaddance.choreo.motion import load_motion
 
         human = load_motion(motion)

@@ -19,6 +19,7 @@ from quaddance.fileio import check_outputs, ensure_dir, remove_empty_dir, write_
 from quaddance.pipeline import DanceSpec, dance_inputs, make_dance
 
 if TYPE_CHECKING:
+    from quaddance.choreo.motion import HumanMotion
     from quaddance.play.policy import OnnxPolicy
     from quaddance.play.rollout import PinnedDynamics
     from quaddance.play.video import VideoRenderer
@@ -36,6 +37,7 @@ class DanceJob:
     out_dir: Path
     song: Path | None = None
     motion: Path | None = None
+    human: HumanMotion | None = None  # ``motion`` already read (eval reads each file once)
     policy: Path | None = None  # None: the shipped policy of the spec's robot
     # Which dance; its paw targets are put in the policy's range (`spec_for_policy`).
     spec: DanceSpec = field(default_factory=DanceSpec)
@@ -239,7 +241,7 @@ def _run_dance(
             from quaddance.play.plots import preload
 
             preload()
-    how = dict(song=job.song, motion=job.motion, spec=spec)
+    how = dict(song=job.song, motion=job.motion, spec=spec, human=job.human)
     dance = None
     if pending is not None and (analysis := pending.analysis()) is not None:
         dance = pending.run(_make_dance, analysis=analysis, **how)

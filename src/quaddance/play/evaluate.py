@@ -9,7 +9,7 @@ import dataclasses
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -17,6 +17,9 @@ from quaddance.errors import QuaddanceError
 from quaddance.fileio import atomic_path, check_outputs, write_json
 from quaddance.play.policy import policy_label
 from quaddance.play.rollout import PinnedDynamics
+
+if TYPE_CHECKING:
+    from quaddance.choreo.motion import HumanMotion
 
 AUDIO_EXT = {".wav", ".flac", ".ogg", ".mp3"}
 MOTION_EXT = {".pkl", ".pickle", ".bvh"}
@@ -84,9 +87,11 @@ def evaluate_items(
     policy: Path | None,
     settings: EvalSettings = EvalSettings(),
     progress: Callable[[int, int, str], None] | None = None,
+    motions: dict[Path, HumanMotion] | None = None,
 ) -> list[dict[str, Any]]:
     """Dance each item without video on the policy's robot (``policy`` None: the shipped
-    Go1 policy); one row per item: ``name`` + every key of its metrics.json."""
+    Go1 policy); one row per item: ``name`` + every key of its metrics.json. A motion item
+    in ``motions`` (`check_eval_files`' result) is danced as read there, not read again."""
     import tempfile
 
     from quaddance.pipeline import DanceSpec
@@ -107,6 +112,7 @@ def evaluate_items(
                 out_dir=Path(tmp) / f"{i}",
                 song=None if is_motion else item,
                 motion=item if is_motion else None,
+                human=(motions or {}).get(item) if is_motion else None,
                 policy=policy,
                 spec=spec,
                 video=False,
@@ -132,11 +138,14 @@ def report_outputs(report: Path) -> dict[str, Path]:
     }
 
 
-def check_eval_files(items: Sequence[Path], report: Path) -> None:
+def check_eval_files(items: Sequence[Path], report: Path) -> dict[Path, HumanMotion]:
     """Everything that can be checked before the work, so that a bad file fails in a moment
     and not after the items before it were danced: the outputs (writable, none an input
     item, none another output: ``-o x.png`` would be its own plot), and each motion file
     (read as the dance will read it; songs are checked when decoded).
+
+    Returns:
+        Each motion item as read, for `evaluate_items` to dance without reading it again.
 
     Raises:
         OutputFileError: an output cannot be written or collides with an input or an output.
@@ -145,9 +154,7 @@ def check_eval_files(items: Sequence[Path], report: Path) -> None:
     from quaddance.choreo.motion import load_motion
 
     check_outputs(report_outputs(report), {f"item {item.name}": item for item in items})
-    for item in items:
-        if item.suffix.lower() in MOTION_EXT:
-            load_motion(item)
+    return {item: load_motion(item) for item in items if item.suffix.lower() in MOTION_EXT}
 
 
 def evaluate(
@@ -163,8 +170,8 @@ def evaluate(
     ``settings``) and a plot (``.png``)."""
     from quaddance.play.plots import plot_eval
 
-    check_eval_files(items, report)
-    rows = evaluate_items(items, policy, settings, progress)
+    motions = check_eval_files(items, report)
+    rows = evaluate_items(items, policy, settings, progress, motions)
     plot_path = report.with_suffix(".png")
     plot_eval(plot_path, rows)
     write_json(
