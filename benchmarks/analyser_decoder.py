@@ -17,7 +17,6 @@ frame. It measures a choice; nothing is tuned by it.
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 from collections.abc import Iterator
 from pathlib import Path
@@ -25,19 +24,18 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.analyser_mix import beatnet_once_per_speed
+from benchmarks.analyser_mix import analysis_scores, beatnet_once_per_speed
 from benchmarks.bar_hmm import DecoderConfig, decode
-from benchmarks.beats import beat_f_measure, metrical_level_f_measure
 from benchmarks.real_music import (
     REAL_SET_ROOTS,
     SPLITS,
     RealSong,
-    downbeat_f,
     load_audio_at,
     load_songs,
     run_as_script,
     score_sets,
     script_command,
+    set_script_parser,
     write_set_results,
 )
 from quaddance.music import analysis
@@ -88,14 +86,6 @@ def decoder(way: str) -> Iterator[None]:
         analysis._track_beats = shipped
 
 
-def _scores(song: RealSong, a: analysis.Analysis) -> dict[str, float]:
-    return {
-        "f_metrical": round(metrical_level_f_measure(song.beats_s, a.beats_s), 4),
-        "f": round(beat_f_measure(song.beats_s, a.beats_s), 4),
-        "downbeat_f": downbeat_f(song, a.downbeats_s),
-    }
-
-
 def score_song(song: RealSong) -> dict[str, dict[str, float]]:
     """The analyser's scores on ``song`` with each decoder."""
     y = np.asarray(load_audio_at(song, SR_HZ), dtype=np.float32)
@@ -103,7 +93,7 @@ def score_song(song: RealSong) -> dict[str, dict[str, float]]:
     with beatnet_once_per_speed(y):
         for way in WAYS:
             with decoder(way):
-                row[way] = _scores(song, analysis.analyze(y, SR_HZ))
+                row[way] = analysis_scores(song, analysis.analyze(y, SR_HZ))
     print(song.name, {w: s["f_metrical"] for w, s in row.items()}, flush=True)
     return row
 
@@ -145,15 +135,8 @@ def run(roots: dict[str, Path], jobs: int = 1) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(
-        prog="python -m benchmarks.analyser_decoder", description=__doc__.split("\n\n")[0]
-    )
-    parser.add_argument("--also", nargs="*", type=Path, default=[], help="more sets' roots")
-    parser.add_argument("--jobs", type=int, default=1, help="songs analysed at once")
-    parser.add_argument("--out", type=Path, default=Path(RESULTS), help="where to write JSON")
+    parser = set_script_parser("benchmarks.analyser_decoder", __doc__, RESULTS, jobs=True)
     args = parser.parse_args(argv)
-    if args.jobs < 1:
-        parser.error("--jobs must be 1 or more")
     result = run({**REAL_SET_ROOTS, **{root.name: root for root in args.also}}, args.jobs)
     extra = ["--jobs", str(args.jobs)] if args.jobs > 1 else []
     command = script_command("benchmarks.analyser_decoder", args.also, extra, args.out, RESULTS)

@@ -107,7 +107,12 @@ shipped one is 3000 on half frames; 1000 on whole frames shipped before)."""
 
 def score(song: RealSong, y: np.ndarray, mix: Mix) -> dict[str, float]:
     heard = y if not mix.gain_db else (y * np.float32(10 ** (mix.gain_db / 20))).astype(y.dtype)
-    a = analysis.analyze(heard, SR_HZ, mix.config())
+    return analysis_scores(song, analysis.analyze(heard, SR_HZ, mix.config()))
+
+
+def analysis_scores(song: RealSong, a: analysis.Analysis) -> dict[str, float]:
+    """The analysis ``a`` of ``song`` scored: beat F (+-70 ms) at its metrical level and
+    strict, and downbeat F."""
     return {
         "f_metrical": round(metrical_level_f_measure(song.beats_s, a.beats_s), 4),
         "f": round(beat_f_measure(song.beats_s, a.beats_s), 4),

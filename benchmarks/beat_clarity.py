@@ -12,7 +12,6 @@ crackle of random clicks).
 
 from __future__ import annotations
 
-import argparse
 import shutil
 import subprocess
 import tempfile
@@ -21,7 +20,13 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.real_music import REAL_SET_ROOTS, load_audio_at, load_songs, run_as_script
+from benchmarks.real_music import (
+    REAL_SET_ROOTS,
+    load_audio_at,
+    load_songs,
+    run_as_script,
+    set_script_parser,
+)
 from quaddance.fileio import write_json
 from quaddance.music import analysis
 from quaddance.music.audio import load_audio
@@ -117,12 +122,7 @@ def run(roots: dict[str, Path]) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(
-        prog="python -m benchmarks.beat_clarity", description=__doc__.split("\n\n")[0]
-    )
-    parser.add_argument("--also", nargs="*", type=Path, default=[], help="more sets' roots")
-    parser.add_argument("--out", type=Path, default=Path(RESULTS), help="where to write JSON")
-    args = parser.parse_args(argv)
+    args = set_script_parser("benchmarks.beat_clarity", __doc__, RESULTS).parse_args(argv)
     roots = {**REAL_SET_ROOTS, **{root.name: root for root in args.also}}
     result = run(roots)
     for group, stats in result["summary"].items():

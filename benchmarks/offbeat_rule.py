@@ -13,7 +13,6 @@ rule that stays; nothing is tuned by it.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 from pathlib import Path
 from typing import Any
@@ -32,6 +31,7 @@ from benchmarks.real_music import (
     run_as_script,
     score_sets,
     script_command,
+    set_script_parser,
     write_set_results,
 )
 from quaddance.music import analysis
@@ -86,12 +86,7 @@ def run(roots: dict[str, Path]) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(
-        prog="python -m benchmarks.offbeat_rule", description=__doc__.split("\n\n")[0]
-    )
-    parser.add_argument("--also", nargs="*", type=Path, default=[], help="more sets' roots")
-    parser.add_argument("--out", type=Path, default=Path(RESULTS), help="where to write JSON")
-    args = parser.parse_args(argv)
+    args = set_script_parser("benchmarks.offbeat_rule", __doc__, RESULTS).parse_args(argv)
     result = run({**REAL_SET_ROOTS, **{root.name: root for root in args.also}})
     command = script_command("benchmarks.offbeat_rule", args.also, [], args.out, RESULTS)
     write_set_results(command, args.out, result)

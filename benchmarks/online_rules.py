@@ -13,7 +13,6 @@ rules that stay; nothing is tuned by it.
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import functools
 from collections.abc import Iterator
@@ -31,6 +30,7 @@ from benchmarks.real_music import (
     run_as_script,
     score_sets,
     script_command,
+    set_script_parser,
     write_set_results,
 )
 from quaddance.music import online_beats
@@ -128,20 +128,15 @@ def run(roots: dict[str, Path], rules: list[str], jobs: int = 1) -> dict[str, An
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(
-        prog="python -m benchmarks.online_rules", description=__doc__.split("\n\n")[0]
-    )
-    parser.add_argument("--also", nargs="*", type=Path, default=[], help="more sets' roots")
+    parser = set_script_parser("benchmarks.online_rules", __doc__, RESULTS, jobs=True)
     parser.add_argument(
         "--rule", action="append", choices=list(RULES_OFF), help="only this rule (repeatable)"
     )
-    parser.add_argument("--jobs", type=int, default=1, help="processes (songs in parallel)")
-    parser.add_argument("--out", type=Path, default=Path(RESULTS), help="where to write JSON")
     args = parser.parse_args(argv)
     rules = args.rule or list(RULES_OFF)
     result = run({**REAL_SET_ROOTS, **{root.name: root for root in args.also}}, rules, args.jobs)
     flags = [f for rule in args.rule or () for f in ("--rule", rule)]
-    if args.jobs != 1:  # the same results, sooner
+    if args.jobs > 1:  # the same results, sooner
         flags += ["--jobs", str(args.jobs)]
     command = script_command("benchmarks.online_rules", args.also, flags, args.out, RESULTS)
     write_set_results(command, args.out, result)

@@ -169,6 +169,29 @@ class SetFileMissingError(QuaddanceError, FileNotFoundError):
     one-line error for the benchmark commands, still a FileNotFoundError for callers."""
 
 
+def set_script_parser(
+    module: str, doc: str, results: str, jobs: bool = False
+) -> argparse.ArgumentParser:
+    """The parser of a script over the real-music sets (``python -m module``, described by the
+    first paragraph of ``doc``): ``--also`` (more sets' roots), ``--out`` (its JSON, by default
+    ``results``) and, with ``jobs``, ``--jobs`` (songs scored at once, in processes)."""
+    parser = argparse.ArgumentParser(prog=f"python -m {module}", description=doc.split("\n\n")[0])
+    parser.add_argument("--also", nargs="*", type=Path, default=[], help="more sets' roots")
+    if jobs:
+        parser.add_argument(
+            "--jobs", type=_at_least_one, default=1, help="songs scored at once (processes)"
+        )
+    parser.add_argument("--out", type=Path, default=Path(results), help="where to write JSON")
+    return parser
+
+
+def _at_least_one(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError("must be 1 or more")
+    return value
+
+
 def script_command(
     module: str, also: Sequence[Path], flags: Sequence[str] = (), out: Path | None = None,
     default_out: str = "",
