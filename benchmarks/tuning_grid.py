@@ -5,12 +5,11 @@ tracker) share."""
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from benchmarks.real_music import RealSong, script_command
+from benchmarks.real_music import RealSong, script_command, set_script_parser
 from quaddance.fileio import write_json
 
 Row = dict[str, Any]
@@ -63,15 +62,13 @@ def main(
     order of ``mix_names``; all of them without ``--mix``) over the tuning songs of the two
     real-music sets (``roots``: `real_music.REAL_SET_ROOTS`) and of each ``--also`` set, write
     the JSON (atomically) and print each mix's F at the metrical level per set."""
-    parser = argparse.ArgumentParser(prog=f"python -m {module}", description=doc.split("\n")[0])
-    parser.add_argument("--also", type=Path, nargs="*", default=[], help="more sets' roots")
+    parser = set_script_parser(module, doc, results)
     parser.add_argument(
         "--mix",
         action="append",
         metavar="NAME",
         help="score only this mix, named as in the JSON's by_mix (repeatable; default: all)",
     )
-    parser.add_argument("--out", type=Path, default=Path(results), help="where to write JSON")
     args = parser.parse_args(argv)
     unknown = [name for name in args.mix or () if name not in mix_names]
     if unknown:
