@@ -435,6 +435,44 @@ def test_a_signal_inside_a_ctypes_callback_still_stops_the_command_in_one_line(s
     assert "not interrupted" not in proc.stdout
 
 
+_SIGNAL_DURING_AN_IMPORT = """
+import os, sys, tempfile, time
+from pathlib import Path
+import quaddance.cli as cli
+from quaddance.cli import main
+
+folder = tempfile.mkdtemp()
+Path(folder, "slow_extension.py").write_text(
+    "import os, time\\n"
+    "os.kill(os.getpid(), SIGNUM)\\n"
+    "time.sleep(0.3)\\n"
+    "print('imported', flush=True)\\n"
+)
+sys.path.insert(0, folder)
+
+def work():
+    import slow_extension  # noqa: F401
+    time.sleep(5.0)  # the work goes on: the interrupt must still stop it
+    print("not interrupted")
+
+cli.app = work
+main()
+"""
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_during_an_import_stops_the_command_once_the_import_is_done(sig):
+    """Seen once in `dance` (Ctrl-C 1 s in): the KeyboardInterrupt raised while torch imported
+    torch.distributed, inside its pybind11 initialisation, which cannot pass it on, and the
+    process aborted with a C++ message. A signal inside an import now waits for its end."""
+    code = _SIGNAL_DURING_AN_IMPORT.replace("SIGNUM", str(int(sig)))
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    expected = EXIT_SIGTERM if sig == signal.SIGTERM else EXIT_SIGINT
+    assert proc.returncode == expected, proc.stderr
+    assert proc.stderr.strip() == "quaddance: interrupted"
+    assert proc.stdout.split() == ["imported"]
+
+
 def test_commands_do_not_load_glfw():
     """Without a MUJOCO_GL, MuJoCo's import loads GLFW, and GLFW's import runs a Python
     subprocess: a Ctrl-C in the first second of `dance` printed its traceback (1 in 40 tries

@@ -32,8 +32,20 @@ def _stop_on_signals() -> dict[int, int]:
 
     received: dict[int, int] = {}
 
+    def resend_soon(signum: int) -> None:
+        # 50 ms later, from another thread: the handler then runs again where it can raise.
+        resend = threading.Timer(0.05, os.kill, args=(os.getpid(), signum))
+        resend.daemon = True
+        resend.start()
+
     def interrupt(signum: int, frame: object) -> None:
         if received:
+            return
+        if _importing(frame):
+            # Raising inside an import can land in an extension's initialisation, which
+            # cannot pass it on: torch's (pybind11) then aborts the process with a C++
+            # message. The signal comes again once the import is done.
+            resend_soon(signum)
             return
         received[signum] = EXIT_SIGTERM if signum == signal.SIGTERM else EXIT_SIGINT
         raise KeyboardInterrupt(f"signal {signum}")
@@ -43,14 +55,12 @@ def _stop_on_signals() -> dict[int, int]:
     def unraisable(info: Any) -> None:
         # A signal that lands in a ctypes callback (numba's LLVM cache, while librosa loads)
         # raises there, where ctypes can only print a traceback and drop the exception. Send
-        # the signal again, 50 ms later from another thread, once this hook has returned: the
-        # handler then raises in a frame of the main thread that can take it.
+        # the signal again once this hook has returned: the handler then raises in a frame of
+        # the main thread that can take it.
         if isinstance(info.exc_value, KeyboardInterrupt) and received:
             signum = next(iter(received))
             received.clear()
-            resend = threading.Timer(0.05, os.kill, args=(os.getpid(), signum))
-            resend.daemon = True
-            resend.start()
+            resend_soon(signum)
             return
         default_unraisable(info)
 
@@ -58,6 +68,15 @@ def _stop_on_signals() -> dict[int, int]:
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, interrupt)
     return received
+
+
+def _importing(frame: Any) -> bool:
+    """Whether ``frame`` (a signal handler's) runs inside an import."""
+    while frame is not None:
+        if frame.f_code.co_filename.startswith("<frozen importlib"):
+            return True
+        frame = frame.f_back
+    return False
 
 
 def run_command(app: Callable[[], Any]) -> None:
